@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The whole test suite from scratch: environment, browser, lint, type check, tests.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup-env.sh
+if ! command -v chromium >/dev/null 2>&1; then
+  if [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null
+  else
+    echo "test.sh: chromium is missing (apt-get install chromium); browser tests will be skipped" >&2
+  fi
+fi
+.venv/bin/ruff check twin backend tests
+.venv/bin/mypy
+export MPLBACKEND=Agg
+.venv/bin/python -m pytest -n 2 --dist loadfile -q "$@"

@@ -1,0 +1,116 @@
+"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench.
+
+Each sub-command lives in its own module and is imported only when used, so
+``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
+bad arguments) print one clear message and exit with status 2; they never end in
+a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+
+log = logging.getLogger("twin")
+
+
+def _rel_point(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y (relative, e.g. 0.5,0.5), got {text!r}") from None
+    if not (0 <= x <= 1 and 0 <= y <= 1):
+        raise argparse.ArgumentTypeError("X,Y are relative to (L_s, W_s) and must lie in [0, 1]")
+    return (x, y)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="furnace-twin", description=__doc__.splitlines()[0])
+    p.add_argument("--config", help="furnace TOML file (default: the built-in furnace)")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("serve", help="dashboard, REST API, websocket stream and viser 3D view")
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--port", type=int, default=8000)
+    s.add_argument("--viser-port", type=int, default=8080)
+    s.add_argument("--data-dir", default=None, help="runs database and recordings (default ./furnace-data)")
+
+    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached)")
+    s.add_argument("--force", action="store_true", help="recompute even if cached")
+
+    s = sub.add_parser("simulate", help="open-loop plant run: timeseries.npz and PNG figures")
+    s.add_argument("--powers", default="0.6", help="group powers as fractions of u_max: one value or 6 comma-separated")
+    s.add_argument("--schedule", default=None, help="JSON file [[t, [u1..u6]], ...] (zero-order hold)")
+    s.add_argument("--duration", type=float, default=240.0, help="s")
+    s.add_argument("--oscillate", action="store_true", help="eta = amplitude sin(2 pi t / period)")
+    s.add_argument("--amplitude", type=float, default=0.048, help="m")
+    s.add_argument("--period", type=float, default=18.0, help="s")
+    s.add_argument("--tc4", type=_rel_point, default=(0.5, 0.5))
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", default="out/simulate")
+
+    s = sub.add_parser("run", help="one headless closed-loop run")
+    s.add_argument("--scenario", default=None, help="scenario JSON file (product.md)")
+    s.add_argument("--oscillate", action="store_true")
+    s.add_argument("--tc4", type=_rel_point, default=None)
+    s.add_argument("--out", default="out/run")
+    s.add_argument("--json", action="store_true", help="print the metrics as JSON")
+
+    s = sub.add_parser("campaign", help="the paper's six experiments and a comparison table")
+    s.add_argument("--out", default="out/campaign")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--t-e", type=float, default=None, help="shorten the transition time (s) for a quick look")
+
+    s = sub.add_parser("bench", help="performance figures")
+    s.add_argument("--json", action="store_true")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    from twin.config import ConfigError, load_config
+
+    try:
+        cfg = load_config(args.config)
+        if args.command == "serve":
+            from backend.server import serve
+
+            return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir)
+        if args.command == "precompute":
+            from twin.radiation.cache import precompute_command
+
+            return precompute_command(cfg, force=args.force)
+        if args.command == "simulate":
+            from twin.simulate import simulate_command
+
+            return simulate_command(cfg, args)
+        if args.command == "run":
+            from twin.runner import run_command
+
+            return run_command(cfg, args)
+        if args.command == "campaign":
+            from twin.campaign import campaign_command
+
+            return campaign_command(cfg, args)
+        if args.command == "bench":
+            from twin.bench import bench_command
+
+            return bench_command(cfg, args)
+    except ConfigError as exc:
+        print(f"furnace-twin: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    raise AssertionError(args.command)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
