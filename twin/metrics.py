@@ -1,0 +1,123 @@
+"""Run metrics (product.md) as pure functions of a run's time series.
+
+All relative errors are divided by the setpoint T_ref(t_E).  Windows: transient
+0 <= t <= t_E, steady 1.5 t_E <= t <= 2 t_E.  The inhomogeneity is the paper's
+sup-norm (section 5.1)
+
+    T_sup(t) = max over the fillet |T_hat(x, y, t) - T_ref(t)|,
+
+evaluated on the stored field grid, so that :func:`compute_metrics` applied to a
+saved ``timeseries.npz`` gives exactly the published ``metrics.json``.
+
+Example
+-------
+>>> import numpy as np
+>>> t = np.linspace(0, 2.0, 21)
+>>> bool(window(t, 1.0, "steady").sum() == 6)
+True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+METRIC_KEYS = (
+    "mean_error_transient_max",
+    "mean_error_steady_max",
+    "tc123_error_max",
+    "tc4_error_transient_max",
+    "tc4_error_steady_max",
+    "inhomogeneity_transient_max",
+    "inhomogeneity_steady",
+    "true_inhomogeneity_steady",
+    "true_mean_error_steady_max",
+    "field_estimation_error_steady_max",
+)
+
+
+def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"]) -> NDArray[np.bool_]:
+    """Boolean mask of the transient (0..t_E), steady (1.5..2 t_E) or after-start (>= t_E/10) samples."""
+    eps = 1e-9 * max(t_E, 1.0)
+    if which == "transient":
+        return (t >= -eps) & (t <= t_E + eps)
+    if which == "steady":
+        return (t >= 1.5 * t_E - eps) & (t <= 2.0 * t_E + eps)
+    return t >= t_E / 10 - eps
+
+
+def fillet_mask(x: Array, y: Array, L_s: float, W_s: float) -> NDArray[np.bool_]:
+    """(N_y, N_x) mask of grid points inside the fillet 0.25-0.75 L_s x 0.2-0.8 W_s (paper section 3.1)."""
+    X, Y = np.meshgrid(x, y)
+    return (X >= 0.25 * L_s) & (X <= 0.75 * L_s) & (Y >= 0.2 * W_s) & (Y <= 0.8 * W_s)
+
+
+def sup_norm(field: Array, T_ref: Array | float, mask: NDArray[np.bool_]) -> Array:
+    """T_sup = max over the fillet |field - T_ref| for fields (m, N_y, N_x) -> (m,) in K."""
+    f = np.asarray(field, float)[..., mask]
+    ref = np.asarray(T_ref, float)
+    return np.max(np.abs(f - (ref[..., None] if ref.ndim else ref)), axis=-1)
+
+
+def fillet_mean(field: Array, mask: NDArray[np.bool_]) -> Array:
+    """Mean of the field over the fillet grid points (K)."""
+    return np.asarray(field, float)[..., mask].mean(axis=-1)
+
+
+def _max(values: Array, sel: NDArray[np.bool_]) -> float:
+    v = np.asarray(values, float)[sel]
+    v = v[np.isfinite(v)]
+    return float(np.max(v)) if v.size else float("nan")
+
+
+def _mean(values: Array, sel: NDArray[np.bool_]) -> float:
+    v = np.asarray(values, float)[sel]
+    v = v[np.isfinite(v)]
+    return float(np.mean(v)) if v.size else float("nan")
+
+
+def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
+    """The product.md metrics from a time-series mapping (the ``timeseries.npz`` layout).
+
+    Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, field_true,
+    x, y, L_s, W_s, t_E, setpoint``.  Windows without samples give NaN (a run stopped early).
+    """
+    t = np.asarray(ts["t"], float)
+    t_E = float(ts["t_E"])
+    scale = float(ts["setpoint"])
+    T_ref = np.asarray(ts["T_ref"], float)
+    tc = np.asarray(ts["tc"], float)
+    tc_hat = np.asarray(ts["tc_hat"], float)
+    mean_err = np.abs(np.asarray(ts["T_mean_hat"], float) - T_ref) / scale
+    tc_err = np.abs(tc - tc_hat) / scale
+
+    tr, st, after = window(t, t_E, "transient"), window(t, t_E, "steady"), window(t, t_E, "after_start")
+
+    tf = np.asarray(ts["t_field"], float)
+    mask = fillet_mask(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
+    ref_f = np.interp(tf, t, T_ref) if t.size else np.zeros_like(tf)
+    f_hat = np.asarray(ts["field_hat"], float)
+    f_true = np.asarray(ts["field_true"], float)
+    sup_hat = sup_norm(f_hat, ref_f, mask) / scale if tf.size else np.zeros(0)
+    sup_true = sup_norm(f_true, ref_f, mask) / scale if tf.size else np.zeros(0)
+    true_mean_err = np.abs(fillet_mean(f_true, mask) - ref_f) / scale if tf.size else np.zeros(0)
+    est_err = np.max(np.abs(f_hat - f_true)[..., mask], axis=-1) / scale if tf.size else np.zeros(0)
+    trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")
+
+    return {
+        "mean_error_transient_max": _max(mean_err, tr),
+        "mean_error_steady_max": _max(mean_err, st),
+        "tc123_error_max": _max(tc_err[:, :3].max(axis=1) if t.size else np.zeros(0), after),
+        "tc4_error_transient_max": _max(tc_err[:, 3] if t.size else np.zeros(0), tr),
+        "tc4_error_steady_max": _max(tc_err[:, 3] if t.size else np.zeros(0), st),
+        "inhomogeneity_transient_max": _max(sup_hat, trf),
+        "inhomogeneity_steady": _mean(sup_hat, stf),
+        "true_inhomogeneity_steady": _mean(sup_true, stf),
+        "true_mean_error_steady_max": _max(true_mean_err, stf),
+        "field_estimation_error_steady_max": _max(est_err, stf),
+    }
