@@ -36,6 +36,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -176,6 +177,8 @@ class ClosedLoop:
         self._phi_cells = self._ctl.model.fe.phi(self._cell_points)
         self._phi_tc = self._ctl.model.fe.phi(self.tc_positions)
         self._series = _Series()
+        #: wall time of estimator + controller per sample (ms), for the benchmark
+        self.compute_ms: list[float] = []
 
     # ------------------------------------------------------------------ helpers
     def _fe_nodes(self) -> int:
@@ -274,10 +277,12 @@ class ClosedLoop:
             j, t = self.j, self.j * self.t_s
             eta = float(self._eta_of_t(t))
             y = self._y_next  # TC1..TC4 at t_j
+            c0 = time.perf_counter()
             state = self.estimator.update(y[:3])  # eq. 13 (faulty readings gated inside)
             theta = state.theta
             ctl = self._ctl
             u, u_ff, _du = ctl.controller.control(j - ctl.j0, theta)  # eqs. 17, 25
+            compute_s = time.perf_counter() - c0
             T_ref = float(self._ref_fn(t))
 
             field_hat = (self._phi_cells @ theta).reshape(self.cfg.specimen.ny, self.cfg.specimen.nx)
@@ -296,7 +301,9 @@ class ClosedLoop:
 
             # the furnace moves on with u held over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self._T = self.plant.step(self._T, snap.u, t, self.t_s, self._eta_of_t)
+            c0 = time.perf_counter()
             self.estimator.predict(snap.u)
+            self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             self._y_next = self._read_tcs(self.j * self.t_s)
             return snap
