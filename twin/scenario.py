@@ -14,9 +14,9 @@ Example
 from __future__ import annotations
 
 import json
-from typing import Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator
 
 MAX_DURATION_S = 3600.0
 MAX_SPEED = 1000.0
@@ -63,7 +63,17 @@ class PointsReference(_Model):
         return self.points[-1][0]
 
 
-Reference = TransitionReference | PointsReference
+def _reference_kind(value: Any) -> str:
+    if isinstance(value, dict):
+        return "points" if "points" in value else "transition"
+    return "points" if isinstance(value, PointsReference) else "transition"
+
+
+#: Either reference form; the discriminator picks the form so errors name the right fields.
+Reference = Annotated[
+    Annotated[TransitionReference, Tag("transition")] | Annotated[PointsReference, Tag("points")],
+    Discriminator(_reference_kind),
+]
 
 
 class OscillationSpec(_Model):
