@@ -115,8 +115,9 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     S = Cu @ PCt + Ru
     gain = np.linalg.solve(S, PCt.T).T  # P C^T S^{-1}, S symmetric
     theta = state.theta + gain @ nu
-    IKC = np.eye(len(theta)) - gain @ Cu
-    P = IKC @ state.P @ IKC.T + gain @ Ru @ gain.T
+    # Joseph form (I - K C) P (I - K C)^T + K R K^T in O(n^2 p): A1 = (I - K C) P, C P = (P C^T)^T
+    A1 = state.P - gain @ PCt.T
+    P = A1 - (A1 @ Cu.T) @ gain.T + gain @ Ru @ gain.T
     return EKFState(theta, 0.5 * (P + P.T)), info
 
 
