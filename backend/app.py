@@ -1,0 +1,117 @@
+"""The FastAPI app factory: REST API, websocket stream, dashboard page, optional viser view.
+
+>>> from backend.app import create_app
+>>> from backend.settings import Settings
+>>> app = create_app(Settings(data_dir="/tmp/furnace-doc"))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI, HTTPException, Request, status
+from fastapi.responses import FileResponse, JSONResponse
+
+from backend.repository import RunRepository
+from backend.routes import files, health, runs, stream
+from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
+from backend.run_worker import ChangeRejected, LoopFactory
+from backend.settings import Settings
+from twin.config import FurnaceConfig, load_config
+
+log = logging.getLogger(__name__)
+
+ASSETS_DIR = Path(__file__).resolve().parent.parent / "frontend_assets"
+ASSET_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".svg": "image/svg+xml"}
+
+
+def plotly_bundle() -> Path:
+    """The plotly.js bundle that the installed ``plotly`` Python package ships (no CDN)."""
+    import plotly
+
+    return Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"
+
+
+def _error(code: int):  # noqa: ANN202 - small handler factory
+    async def handler(_: Request, exc: Exception) -> JSONResponse:
+        return JSONResponse({"detail": str(exc) or type(exc).__name__}, status_code=code)
+
+    return handler
+
+
+def create_app(
+    settings: Settings | None = None,
+    cfg: FurnaceConfig | None = None,
+    *,
+    loop_factory: LoopFactory | None = None,
+    viser: bool = False,
+) -> FastAPI:
+    """Build the app; the lifespan opens the database, marks crashed runs interrupted, and
+    (with ``viser=True``) starts the 3D view on ``settings.viser_port``."""
+    settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
+    cfg = cfg or load_config()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        settings.runs_dir.mkdir(parents=True, exist_ok=True)
+        repo = RunRepository(settings.db_path)
+        interrupted = repo.mark_interrupted()
+        if interrupted:
+            log.warning("runs interrupted by the last shutdown: %s", ", ".join(interrupted))
+        manager = RunManager(settings, cfg, repo, loop_factory)
+        app.state.settings, app.state.repo, app.state.manager = settings, repo, manager
+        app.state.viser_url = None
+        scene = None
+        if viser and settings.viser_port:
+            import asyncio
+
+            from backend.viser_view import FurnaceView
+
+            manager.event_loop = asyncio.get_running_loop()
+            scene = FurnaceView(cfg, manager, host=settings.host, port=settings.viser_port)
+            scene.start()
+            app.state.viser_url = scene.url
+        app.state.viser = scene
+        try:
+            yield
+        finally:
+            await manager.shutdown()
+            if scene is not None:
+                scene.stop()
+            repo.close()
+
+    app = FastAPI(
+        title="furnace-twin",
+        version="0.1.0",
+        description="Live digital twin of the oscillating infrared annealing furnace "
+        "(Jadachowski, Steinboeck, Kugi, CEP 78, 2018): runs, live stream, recordings.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.include_router(health.router)
+    app.include_router(runs.router)
+    app.include_router(files.router)
+    app.include_router(stream.router)
+    app.add_exception_handler(RunNotFound, _error(status.HTTP_404_NOT_FOUND))
+    app.add_exception_handler(RunNotActive, _error(status.HTTP_409_CONFLICT))
+    app.add_exception_handler(TooManyRuns, _error(status.HTTP_429_TOO_MANY_REQUESTS))
+    app.add_exception_handler(LimitExceeded, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
+    app.add_exception_handler(ChangeRejected, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
+
+    @app.get("/", include_in_schema=False)
+    def dashboard() -> FileResponse:
+        return FileResponse(ASSETS_DIR / "index.html", media_type="text/html")
+
+    @app.get("/assets/{name}", include_in_schema=False)
+    def asset(name: str) -> FileResponse:
+        if name == "plotly.min.js":
+            return FileResponse(plotly_bundle(), media_type="text/javascript")
+        path = ASSETS_DIR / name
+        if "/" in name or name.startswith(".") or path.suffix not in ASSET_TYPES or not path.is_file():
+            raise HTTPException(status.HTTP_404_NOT_FOUND, f"no asset {name!r}")
+        return FileResponse(path, media_type=ASSET_TYPES[path.suffix])
+
+    return app

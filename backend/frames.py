@@ -1,0 +1,110 @@
+"""Stream frames (product.md, "Stream frame"): one JSON object per published closed-loop sample.
+
+Keys of the contract: ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K, fillet mean of the
+estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``, ``tc_hat``
+(the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
+of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
+(unix s when the sample was computed, for latency), ``status`` and ``events``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Protocol
+
+import numpy as np
+
+FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps frames small
+
+
+class SnapshotLike(Protocol):
+    """What the backend reads from ``twin.loop.Snapshot`` (docs/interfaces.md)."""
+
+    t: float
+    eta: float
+    T_ref: float
+    T_mean_hat: float
+    field_hat: Any
+    field_true: Any
+    tc: Any
+    tc_hat: Any
+    u: Any
+    u_ff: Any
+    inhomogeneity: float
+    true_mean: float
+    true_inhomogeneity: float
+    events: Any
+
+
+def finite_or_none(x: Any) -> float | None:
+    """A JSON-safe float: NaN and inf (e.g. a gated or missing TC) become ``None``."""
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def _vector(a: Any, decimals: int = 4) -> list[float | None]:
+    return [finite_or_none(round(float(v), decimals)) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def _events(ev: Any) -> list[str]:
+    if ev is None:
+        return []
+    if isinstance(ev, str):
+        return [ev]
+    return [str(e) for e in ev]
+
+
+def scalar_values(s: SnapshotLike) -> dict[str, Any]:
+    """The small part of a snapshot (no fields): stored as the run's latest values."""
+    return {
+        "t": float(s.t),
+        "eta": float(s.eta),
+        "T_ref": finite_or_none(s.T_ref),
+        "T_mean_hat": finite_or_none(s.T_mean_hat),
+        "tc": _vector(s.tc),
+        "tc_hat": _vector(s.tc_hat),
+        "u": _vector(s.u),
+        "u_ff": _vector(s.u_ff),
+        "inhomogeneity": finite_or_none(s.inhomogeneity),
+        "true_mean": finite_or_none(s.true_mean),
+        "true_inhomogeneity": finite_or_none(s.true_inhomogeneity),
+    }
+
+
+def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str) -> dict[str, Any]:
+    field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
+    field = np.where(np.isfinite(field), field, np.nan)
+    frame = scalar_values(s)
+    frame.update(
+        run_id=run_id,
+        seq=seq,
+        wall_time=wall_time,
+        status=status,
+        field=[[finite_or_none(v) for v in row] for row in field],
+        events=_events(s.events),
+    )
+    return frame
+
+
+def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str) -> str:
+    """The frame as JSON text, serialised once and sent to every client."""
+    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status),
+                      allow_nan=False, separators=(",", ":"))
+
+
+def json_safe(obj: Any) -> Any:
+    """Recursively turn numpy scalars/arrays and non-finite floats into plain JSON values."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, bool | np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return finite_or_none(obj)
+    return obj

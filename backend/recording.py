@@ -1,0 +1,174 @@
+"""The rerun recording of one run (``recording.rrd``), written as the run goes.
+
+One :class:`rerun.RecordingStream` per run, saved to its file before anything is logged
+(rerun then flushes to disk as it goes).  Entities, on the timeline ``t`` (simulated s):
+
+- ``field/estimated``, ``field/true``: the estimated and the plant's temperature field
+  (N_y x N_x, K) as colour-mapped depth images (Turbo, fixed range), every
+  ``image_interval`` simulated seconds; ``field/fillet`` the fillet outline, ``field/tc``
+  the TC positions (static, in cell coordinates);
+- ``temperature/T_ref``, ``temperature/T_mean_hat``, ``temperature/true_mean`` (K);
+- ``tc/reading/TC1..4`` and ``tc/error/TC1..4`` (reading minus estimate, K);
+- ``power/u/<group>`` and ``power/u_ff/<group>`` (fractions of u_max);
+- ``eta`` (m), ``inhomogeneity/estimated`` and ``inhomogeneity/true`` (K).
+
+Scalars are buffered and sent as columns (``send_columns``) at each :meth:`flush`; the
+default blueprint opens the viewer on fields | temperatures and TCs | powers and eta.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from backend.frames import SnapshotLike
+from twin.config import FurnaceConfig
+
+log = logging.getLogger(__name__)
+
+APP_ID = "furnace-twin"
+TIMELINE = "t"
+TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
+
+
+def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
+    """Fields on the left, temperatures and TCs in the middle, powers and eta on the right."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial2DView(name="estimated field (K)", origin="field", contents=[
+                    "field/estimated", "field/fillet", "field/tc"]),
+                rrb.Spatial2DView(name="true field (K)", origin="field", contents=[
+                    "field/true", "field/fillet", "field/tc"]),
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="fillet mean vs reference (K)", origin="temperature"),
+                rrb.TimeSeriesView(name="TC readings (K)", origin="tc/reading"),
+                rrb.TimeSeriesView(name="TC reading - estimate (K)", origin="tc/error"),
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="group powers u (fraction of u_max)", origin="power/u"),
+                rrb.TimeSeriesView(name="feedforward u_ff (fraction of u_max)", origin="power/u_ff"),
+                rrb.TimeSeriesView(name="inhomogeneity (K)", origin="inhomogeneity"),
+                rrb.TimeSeriesView(name="eta (m)", origin="eta"),
+            ),
+            column_shares=[2, 2, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+class RecordingSink:
+    """Collects snapshots of one run and writes them to ``path`` (an ``.rrd`` file)."""
+
+    def __init__(
+        self,
+        cfg: FurnaceConfig,
+        run_id: str,
+        path: Path,
+        *,
+        tc_positions: list[tuple[float, float]],
+        image_interval: float = 0.5,
+        temperature_range: tuple[float, float] = (300.0, 1300.0),
+    ) -> None:
+        self.cfg = cfg
+        self.path = path
+        self.image_interval = image_interval
+        self.temperature_range = temperature_range
+        self.groups = tuple(g.name for g in cfg.lamps.groups)
+        self.rec = rr.RecordingStream(APP_ID, recording_id=run_id)
+        self.rec.save(str(path), default_blueprint=blueprint(self.groups))
+        self._rows: list[dict[str, Any]] = []
+        self._next_image_t = -np.inf
+        self._closed = False
+        self._log_static(tc_positions)
+
+    def _cell(self, x: float, y: float) -> tuple[float, float]:
+        """Absolute position (m) -> image pixel coordinates (column, row) of the N_y x N_x field."""
+        s = self.cfg.specimen
+        return (x / s.length * s.nx, y / s.width * s.ny)
+
+    def _log_static(self, tc_positions: list[tuple[float, float]]) -> None:
+        x0, x1, y0, y1 = self.cfg.fillet
+        corners = [self._cell(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0))]
+        self.rec.log("field/fillet", rr.LineStrips2D([corners], colors=[255, 255, 255], radii=0.08),
+                     static=True)
+        self.rec.log(
+            "field/tc",
+            rr.Points2D([self._cell(x, y) for x, y in tc_positions], labels=list(TC_NAMES),
+                        colors=[[255, 255, 255]] * 3 + [[255, 80, 200]], radii=0.35),
+            static=True,
+        )
+        palette = [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
+                   [140, 86, 75]]
+        for kind in ("u", "u_ff"):
+            for j, g in enumerate(self.groups):
+                self.rec.log(f"power/{kind}/{g}", rr.SeriesLines(names=[f"{kind} {g}"],
+                             colors=[palette[j % len(palette)]]), static=True)
+        for i, name in enumerate(TC_NAMES):
+            for kind in ("reading", "error"):
+                self.rec.log(f"tc/{kind}/{name}", rr.SeriesLines(names=[name],
+                             colors=[palette[i]]), static=True)
+        for name, color in (("T_ref", [0, 0, 0]), ("T_mean_hat", [214, 39, 40]),
+                            ("true_mean", [31, 119, 180])):
+            self.rec.log(f"temperature/{name}", rr.SeriesLines(names=[name], colors=[color]), static=True)
+        self.rec.log("eta", rr.SeriesLines(names=["eta"]), static=True)
+        self.rec.log("inhomogeneity/estimated", rr.SeriesLines(names=["estimated"]), static=True)
+        self.rec.log("inhomogeneity/true", rr.SeriesLines(names=["true"]), static=True)
+
+    def add(self, s: SnapshotLike) -> None:
+        """Buffer the scalars of one sample; log the field images every ``image_interval`` s."""
+        if self._closed:
+            return
+        self._rows.append({
+            "t": float(s.t), "eta": float(s.eta), "T_ref": float(s.T_ref), "T_mean_hat": float(s.T_mean_hat),
+            "true_mean": float(s.true_mean), "inh": float(s.inhomogeneity),
+            "inh_true": float(s.true_inhomogeneity),
+            "tc": np.asarray(s.tc, dtype=float), "tc_hat": np.asarray(s.tc_hat, dtype=float),
+            "u": np.asarray(s.u, dtype=float), "u_ff": np.asarray(s.u_ff, dtype=float),
+        })
+        if s.t >= self._next_image_t:
+            self._next_image_t = float(s.t) + self.image_interval
+            self.rec.set_time(TIMELINE, duration=float(s.t))
+            for name, field in (("estimated", s.field_hat), ("true", s.field_true)):
+                self.rec.log(f"field/{name}", rr.DepthImage(
+                    np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
+                    depth_range=list(self.temperature_range)))
+
+    def flush(self) -> None:
+        """Send the buffered scalars as columns and push them to the file."""
+        if self._closed or not self._rows:
+            return
+        rows, self._rows = self._rows, []
+        times = rr.TimeColumn(TIMELINE, duration=np.array([r["t"] for r in rows]))
+
+        def send(entity: str, values: np.ndarray) -> None:
+            self.rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
+
+        for key, entity in (("T_ref", "temperature/T_ref"), ("T_mean_hat", "temperature/T_mean_hat"),
+                            ("true_mean", "temperature/true_mean"), ("eta", "eta"),
+                            ("inh", "inhomogeneity/estimated"), ("inh_true", "inhomogeneity/true")):
+            send(entity, np.array([r[key] for r in rows]))
+        tc = np.stack([r["tc"] for r in rows])
+        tc_err = tc - np.stack([r["tc_hat"] for r in rows])
+        for i, name in enumerate(TC_NAMES):
+            send(f"tc/reading/{name}", tc[:, i])
+            send(f"tc/error/{name}", tc_err[:, i])
+        for kind in ("u", "u_ff"):
+            arr = np.stack([r[kind] for r in rows])
+            for j, g in enumerate(self.groups):
+                send(f"power/{kind}/{g}", arr[:, j])
+        self.rec.flush()
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self.flush()
+        self._closed = True
+        self.rec.flush()
+        self.rec.disconnect()

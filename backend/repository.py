@@ -1,0 +1,181 @@
+"""Run persistence: one SQLite file (WAL) with the runs and the changes made while they ran.
+
+The table ``runs`` holds the scenario, status, timestamps (unix s), the latest values and
+the metrics of every run; ``changes`` holds each reference / oscillation change with the
+simulated time at which it was applied.  All methods are thread-safe (one connection,
+one lock), so the run workers write from their own threads.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS runs (
+    id TEXT PRIMARY KEY,
+    scenario TEXT NOT NULL,
+    status TEXT NOT NULL,
+    created_at REAL NOT NULL,
+    started_at REAL,
+    ended_at REAL,
+    latest TEXT,
+    metrics TEXT,
+    error TEXT
+);
+CREATE TABLE IF NOT EXISTS changes (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    run_id TEXT NOT NULL REFERENCES runs(id),
+    kind TEXT NOT NULL,
+    body TEXT NOT NULL,
+    requested_at REAL NOT NULL,
+    status TEXT NOT NULL,
+    applied_t REAL,
+    message TEXT
+);
+CREATE INDEX IF NOT EXISTS changes_run ON changes(run_id);
+"""
+
+ACTIVE_STATUSES = ("queued", "starting", "running")
+
+
+@dataclass(frozen=True)
+class RunRow:
+    id: str
+    scenario: dict[str, Any]
+    status: str
+    created_at: float
+    started_at: float | None
+    ended_at: float | None
+    latest: dict[str, Any] | None
+    metrics: dict[str, Any] | None
+    error: str | None
+
+
+@dataclass(frozen=True)
+class ChangeRow:
+    id: int
+    run_id: str
+    kind: str
+    body: dict[str, Any]
+    requested_at: float
+    status: str
+    applied_t: float | None
+    message: str | None
+
+
+def _loads(text: str | None) -> Any:
+    return None if text is None else json.loads(text)
+
+
+class RunRepository:
+    """Thread-safe access to ``runs.sqlite3``."""
+
+    def __init__(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def _exec(self, sql: str, args: tuple[Any, ...] = ()) -> sqlite3.Cursor:
+        with self._lock:
+            return self._db.execute(sql, args)
+
+    def create_run(self, run_id: str, scenario_json: str, status: str = "queued") -> None:
+        self._exec(
+            "INSERT INTO runs (id, scenario, status, created_at) VALUES (?, ?, ?, ?)",
+            (run_id, scenario_json, status, time.time()),
+        )
+
+    def set_status(self, run_id: str, status: str, *, error: str | None = None) -> None:
+        now = time.time()
+        if status == "running":
+            self._exec("UPDATE runs SET status=?, started_at=? WHERE id=?", (status, now, run_id))
+        elif status in ACTIVE_STATUSES:
+            self._exec("UPDATE runs SET status=? WHERE id=?", (status, run_id))
+        else:
+            self._exec(
+                "UPDATE runs SET status=?, ended_at=?, error=COALESCE(?, error) WHERE id=?",
+                (status, now, error, run_id),
+            )
+
+    def save_progress(
+        self, run_id: str, latest: dict[str, Any] | None, metrics: dict[str, Any] | None = None
+    ) -> None:
+        """Store the latest values (and metrics, when known) as JSON."""
+        self._exec(
+            "UPDATE runs SET latest=COALESCE(?, latest), metrics=COALESCE(?, metrics) WHERE id=?",
+            (
+                None if latest is None else json.dumps(latest),
+                None if metrics is None else json.dumps(metrics),
+                run_id,
+            ),
+        )
+
+    def get(self, run_id: str) -> RunRow | None:
+        cur = self._exec("SELECT * FROM runs WHERE id=?", (run_id,))
+        row = cur.fetchone()
+        return None if row is None else self._run(row)
+
+    def list_runs(self, limit: int = 200) -> list[RunRow]:
+        cur = self._exec("SELECT * FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
+        return [self._run(r) for r in cur.fetchall()]
+
+    def count_active(self) -> int:
+        marks = ",".join("?" * len(ACTIVE_STATUSES))
+        cur = self._exec(f"SELECT COUNT(*) FROM runs WHERE status IN ({marks})", ACTIVE_STATUSES)
+        return int(cur.fetchone()[0])
+
+    def mark_interrupted(self) -> list[str]:
+        """After a restart: runs still marked active did not end cleanly; call them interrupted."""
+        marks = ",".join("?" * len(ACTIVE_STATUSES))
+        cur = self._exec(f"SELECT id FROM runs WHERE status IN ({marks})", ACTIVE_STATUSES)
+        ids = [r[0] for r in cur.fetchall()]
+        for run_id in ids:
+            self._exec(
+                "UPDATE runs SET status='interrupted', "
+                "error=COALESCE(error, 'the server stopped while the run was going') WHERE id=?",
+                (run_id,),
+            )
+        return ids
+
+    def add_change(self, run_id: str, kind: str, body: dict[str, Any]) -> int:
+        cur = self._exec(
+            "INSERT INTO changes (run_id, kind, body, requested_at, status) VALUES (?, ?, ?, ?, 'pending')",
+            (run_id, kind, json.dumps(body), time.time()),
+        )
+        return int(cur.lastrowid or 0)
+
+    def finish_change(self, change_id: int, status: str, applied_t: float | None, message: str | None) -> None:
+        self._exec(
+            "UPDATE changes SET status=?, applied_t=?, message=? WHERE id=?",
+            (status, applied_t, message, change_id),
+        )
+
+    def changes(self, run_id: str) -> list[ChangeRow]:
+        cur = self._exec("SELECT * FROM changes WHERE run_id=? ORDER BY id", (run_id,))
+        return [
+            ChangeRow(
+                id=r[0], run_id=r[1], kind=r[2], body=json.loads(r[3]), requested_at=r[4],
+                status=r[5], applied_t=r[6], message=r[7],
+            )
+            for r in cur.fetchall()
+        ]
+
+    @staticmethod
+    def _run(r: tuple[Any, ...]) -> RunRow:
+        return RunRow(
+            id=r[0], scenario=json.loads(r[1]), status=r[2], created_at=r[3], started_at=r[4],
+            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8],
+        )

@@ -1,0 +1,40 @@
+"""``/api/runs/{id}/recording`` and ``/timeseries``: a run's own files, nothing else."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import APIRouter, HTTPException, status
+from fastapi.responses import FileResponse
+
+from backend.deps import ManagerDep, RepoDep
+
+router = APIRouter(prefix="/api/runs", tags=["files"])
+
+
+def _file(run_id: str, manager: ManagerDep, repo: RepoDep, which: str) -> Path:
+    if repo.get(run_id) is None:  # the id comes from the database before it names a folder
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no run with id {run_id!r}")
+    files = manager.files(run_id)
+    path: Path = getattr(files, which)
+    if not path.is_file():
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {path.name} (yet)")
+    return path
+
+
+@router.get("/{run_id}/recording", response_class=FileResponse,
+            responses={200: {"content": {"application/octet-stream": {}}},
+                       404: {"description": "no such run or no recording"}})
+def recording(run_id: str, manager: ManagerDep, repo: RepoDep) -> FileResponse:
+    """The rerun recording (``.rrd``); open it with ``rerun FILE``."""
+    path = _file(run_id, manager, repo, "recording")
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd")
+
+
+@router.get("/{run_id}/timeseries", response_class=FileResponse,
+            responses={200: {"content": {"application/octet-stream": {}}},
+                       404: {"description": "no such run or no time series"}})
+def timeseries(run_id: str, manager: ManagerDep, repo: RepoDep) -> FileResponse:
+    """The raw time series (``.npz``, layout in product.md), flushed every few seconds while running."""
+    path = _file(run_id, manager, repo, "timeseries")
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")

@@ -1,0 +1,69 @@
+"""``WS /api/runs/{id}/stream``: the run's frames (backend.frames), one bounded queue per client."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi.responses import PlainTextResponse
+
+from backend.repository import RunRepository
+from backend.run_manager import RunManager
+
+log = logging.getLogger(__name__)
+router = APIRouter(prefix="/api/runs", tags=["stream"])
+
+
+async def _deny(ws: WebSocket, code: int, message: str) -> None:
+    try:
+        await ws.send_denial_response(PlainTextResponse(message, status_code=code))
+    except RuntimeError:  # server without the denial-response extension
+        await ws.close(code=4000 + code, reason=message)
+
+
+@router.websocket("/{run_id}/stream")
+async def stream(ws: WebSocket, run_id: str) -> None:
+    """Frames of a running run until it ends; an ended run sends its last frame and closes."""
+    manager: RunManager = ws.app.state.manager
+    repo: RunRepository = ws.app.state.repo
+    if repo.get(run_id) is None:
+        await _deny(ws, 404, f"no run with id {run_id!r}")
+        return
+    hub = manager.hub(run_id)
+    await ws.accept()
+    if hub is None:
+        last = manager.last_frame(run_id)
+        if last is not None:
+            await ws.send_text(last)
+        await ws.close(code=1000, reason="the run has ended")
+        return
+    sub = hub.subscribe()
+
+    async def watch_disconnect() -> None:
+        with contextlib.suppress(WebSocketDisconnect, RuntimeError):
+            while True:
+                msg = await ws.receive()
+                if msg["type"] == "websocket.disconnect":
+                    return
+
+    watcher = asyncio.create_task(watch_disconnect())
+    try:
+        while True:
+            getter = asyncio.ensure_future(sub.queue.get())
+            done, _ = await asyncio.wait({getter, watcher}, return_when=asyncio.FIRST_COMPLETED)
+            if getter not in done:
+                getter.cancel()
+                return  # client went away
+            frame = getter.result()
+            if frame is None:
+                await ws.close(code=1000, reason="the run has ended")
+                return
+            await ws.send_text(frame)
+            sub.delivered += 1
+    except (WebSocketDisconnect, RuntimeError, ConnectionError):
+        return
+    finally:
+        hub.unsubscribe(sub)
+        watcher.cancel()

@@ -1,0 +1,63 @@
+"""A run's folder: ``scenario.json``, ``timeseries.npz``, ``metrics.json``, ``recording.rrd``.
+
+Files are replaced atomically (write to a temporary name, then ``os.replace``), so a
+reader or a crash never sees half a file: after a crash the folder holds the last
+complete flush.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from backend.frames import json_safe
+
+RECORDING = "recording.rrd"
+TIMESERIES = "timeseries.npz"
+METRICS = "metrics.json"
+SCENARIO = "scenario.json"
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """Paths of one run's files (only these are ever served for the run)."""
+
+    folder: Path
+
+    @property
+    def recording(self) -> Path:
+        return self.folder / RECORDING
+
+    @property
+    def timeseries(self) -> Path:
+        return self.folder / TIMESERIES
+
+    @property
+    def metrics(self) -> Path:
+        return self.folder / METRICS
+
+    @property
+    def scenario(self) -> Path:
+        return self.folder / SCENARIO
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(json_safe(obj), indent=2, sort_keys=True, allow_nan=False))
+    os.replace(tmp, path)
+
+
+def write_npz_atomic(path: Path, arrays: Mapping[str, Any]) -> None:
+    """``np.savez`` to ``path`` atomically; strings (e.g. the scenario JSON) become 0-d arrays."""
+    tmp = path.with_name(path.name + ".tmp.npz")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, **{k: np.asarray(v) for k, v in arrays.items()})  # type: ignore[arg-type]
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)

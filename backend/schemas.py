@@ -1,0 +1,71 @@
+"""Response schemas of the REST API (the request bodies are ``twin.scenario`` models)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+
+class Health(BaseModel):
+    status: str = Field(description="'ok' while the server answers")
+    active_runs: int
+    max_concurrent_runs: int
+    viser_url: str | None = Field(None, description="the 3D view, when it runs")
+    auth_required: bool = Field(description="mutating endpoints need the API token")
+
+
+class RunLinks(BaseModel):
+    self: str
+    stream: str
+    metrics: str
+    recording: str
+    timeseries: str
+
+
+class RunCreated(BaseModel):
+    id: str
+    status: str
+    links: RunLinks
+
+
+class ChangeOut(BaseModel):
+    id: int
+    kind: str = Field(description="'reference' or 'oscillation'")
+    body: dict[str, Any]
+    requested_at: float = Field(description="unix s")
+    status: str = Field(description="pending, applied, rejected, failed or cancelled")
+    applied_t: float | None = Field(None, description="simulated time of the sample it applied at (s)")
+    message: str | None = None
+
+
+class ChangeResult(BaseModel):
+    id: int
+    kind: str
+    status: str = Field(description="'applied', or 'pending' if the re-plan outlasted the wait")
+    body: dict[str, Any]
+    applied_t: float | None = None
+    replan_s: float | None = Field(None, description="wall time of the re-plan (s)")
+
+
+class RunSummary(BaseModel):
+    id: str
+    status: str = Field(description="queued, starting, running, finished, stopped, interrupted or error")
+    created_at: float = Field(description="unix s")
+    started_at: float | None = None
+    ended_at: float | None = None
+    scenario: dict[str, Any]
+    latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
+    metrics: dict[str, float | None] | None = None
+    error: str | None = None
+    links: RunLinks
+
+
+class RunDetail(RunSummary):
+    changes: list[ChangeOut] = Field(default_factory=list)
+    files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
+
+
+class StopResult(BaseModel):
+    id: str
+    status: str = Field(description="'stopping': the run ends at its next sample and keeps its data")

@@ -1,0 +1,149 @@
+"""Fixtures of the backend tests (no package: pytest's rootdir-relative import).
+
+``FakeLoop`` is a small, fast stand-in for ``twin.loop.ClosedLoop`` used only where the test
+is about the backend's plumbing (queues, limits, status codes, schemathesis); the lifecycle,
+websocket and browser tests run the real closed loop with ``small_config()``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+os.environ.setdefault("FURNACE_TWIN_CACHE", str(REPO / ".cache" / "test-radiation"))
+ARTIFACTS = REPO / "test-artifacts"
+
+
+@dataclass(frozen=True)
+class FakeSnapshot:
+    t: float
+    eta: float
+    T_ref: float
+    T_mean_hat: float
+    field_hat: Any
+    field_true: Any
+    tc: Any
+    tc_hat: Any
+    u: Any
+    u_ff: Any
+    inhomogeneity: float
+    true_mean: float
+    true_inhomogeneity: float
+    events: tuple[str, ...] = ()
+
+
+@dataclass
+class FakeLoop:
+    """First-order lag towards a ramp reference: T_mean follows T_ref with time constant 5 s.
+
+    eta(t) = A sin(2 pi t / period) when oscillation is on.  ``step_cost_s`` burns wall time
+    per step to imitate a slow loop; ``replan_s`` sleeps inside set_reference/set_oscillation.
+    """
+
+    cfg: Any
+    scenario: Any
+    step_cost_s: float = 0.0
+    replan_s: float = 0.0
+    t: float = 0.0
+    T: float = 300.0
+    reference: Any = None
+    oscillation: Any = None
+    rows: list[FakeSnapshot] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.reference = self.scenario.reference
+        self.oscillation = self.scenario.oscillation
+
+    @property
+    def done(self) -> bool:
+        return self.t >= self.scenario.duration - 1e-9
+
+    def T_ref(self, t: float) -> float:
+        r = self.reference
+        if hasattr(r, "points"):
+            return float(np.interp(t, [p[0] for p in r.points], [p[1] for p in r.points]))
+        return 300.0 + (r.setpoint - 300.0) * min(t / r.t_E, 1.0)
+
+    def step(self) -> FakeSnapshot:
+        if self.step_cost_s:
+            end = time.perf_counter() + self.step_cost_s
+            while time.perf_counter() < end:
+                pass
+        dt = self.cfg.sampling.t_s
+        self.t = round(self.t + dt, 9)
+        ref = self.T_ref(self.t)
+        self.T += (ref - self.T) * dt / 5.0
+        o = self.oscillation
+        eta = o.amplitude * math.sin(2 * math.pi * self.t / o.period) if o.enabled else 0.0
+        s = self.cfg.specimen
+        field_ = np.full((s.ny, s.nx), self.T) + np.linspace(-5, 5, s.nx)[None, :]
+        snap = FakeSnapshot(
+            t=self.t, eta=eta, T_ref=ref, T_mean_hat=self.T, field_hat=field_, field_true=field_ + 1.0,
+            tc=np.full(4, self.T + 0.5), tc_hat=np.full(4, self.T), u=np.full(6, 0.5), u_ff=np.full(6, 0.4),
+            inhomogeneity=5.0, true_mean=self.T + 1.0, true_inhomogeneity=6.0,
+        )
+        self.rows.append(snap)
+        return snap
+
+    def set_reference(self, ref: Any) -> None:
+        time.sleep(self.replan_s)
+        if getattr(ref, "setpoint", 0) > 1250.0:
+            raise ValueError("setpoint unreachable in the fake furnace")
+        self.reference = ref
+
+    def set_oscillation(self, spec: Any) -> None:
+        time.sleep(self.replan_s)
+        self.oscillation = spec
+
+    def timeseries(self) -> dict[str, Any]:
+        r = self.rows
+        return {
+            "t": np.array([s.t for s in r]), "eta": np.array([s.eta for s in r]),
+            "T_ref": np.array([s.T_ref for s in r]), "T_mean_hat": np.array([s.T_mean_hat for s in r]),
+            "tc": np.array([s.tc for s in r]), "tc_hat": np.array([s.tc_hat for s in r]),
+            "u": np.array([s.u for s in r]), "u_ff": np.array([s.u_ff for s in r]),
+        }
+
+    def metrics(self) -> dict[str, Any]:
+        err = [abs(s.T_mean_hat - s.T_ref) for s in self.rows]
+        return {"mean_error_transient_max": max(err) if err else float("nan"),
+                "mean_error_steady_max": float("nan")}
+
+
+def fake_factory(step_cost_s: float = 0.0, replan_s: float = 0.0):
+    def make(cfg: Any, scenario: Any) -> FakeLoop:
+        return FakeLoop(cfg, scenario, step_cost_s=step_cost_s, replan_s=replan_s)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def small_cfg():
+    from twin.config import small_config
+
+    return small_config()
+
+
+@pytest.fixture
+def artifacts() -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    return ARTIFACTS
+
+
+@pytest.fixture
+def isolated_home(tmp_path, monkeypatch) -> Path:
+    """rerun's CLI writes under ~/.config: point HOME and the XDG dirs at a temp dir."""
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    for var in ("XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_DATA_HOME"):
+        monkeypatch.setenv(var, str(home / var.lower()))
+    return home
