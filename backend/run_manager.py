@@ -109,11 +109,14 @@ class RunManager:
     # ---- start ----
     def check_limits(self, scenario: Scenario) -> None:
         s = self.settings
+        problems = []
         if scenario.duration > s.max_duration_s:
-            raise LimitExceeded(f"duration: {scenario.duration:g} s exceeds this server's limit of "
-                                f"{s.max_duration_s:g} s")
+            problems.append(f"duration: {scenario.duration:g} s exceeds this server's limit of "
+                            f"{s.max_duration_s:g} s")
         if scenario.speed != "max" and float(scenario.speed) > s.max_speed:
-            raise LimitExceeded(f"speed: {scenario.speed} exceeds this server's limit of {s.max_speed:g}")
+            problems.append(f"speed: {scenario.speed:g} exceeds this server's limit of {s.max_speed:g}")
+        if problems:
+            raise LimitExceeded("; ".join(problems))
 
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id."""

@@ -10,7 +10,7 @@ from backend.deps import ManagerDep, RepoDep, TokenDep
 from backend.repository import RunRow
 from backend.run_manager import RunManager
 from backend.schemas import ChangeOut, ChangeResult, RunCreated, RunDetail, RunLinks, RunSummary, StopResult
-from twin.scenario import OscillationSpec, PointsReference, Scenario, TransitionReference
+from twin.scenario import OscillationSpec, Reference, Scenario
 
 router = APIRouter(prefix="/api/runs", tags=["runs"])
 DEFAULT_SCENARIO = Scenario.model_validate({})
@@ -88,7 +88,7 @@ def stop_run(run_id: str, manager: ManagerDep, repo: RepoDep) -> StopResult:
                        422: {"description": "invalid or unreachable reference"}})
 async def change_reference(
     run_id: str, manager: ManagerDep, repo: RepoDep,
-    reference: Annotated[TransitionReference | PointsReference, Body()],
+    reference: Annotated[Reference, Body()],
 ) -> ChangeResult:
     """New reference (setpoint and t_E, or points); the feedforward is re-planned from the estimate.
 

@@ -1,0 +1,194 @@
+"""REST status codes and the run lifecycle plumbing, with a fast stand-in loop (conftest.FakeLoop).
+
+The physics of the real closed loop is exercised in test_lifecycle_real.py; here the loop is
+the conftest's first-order lag, so each test runs in well under a second.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import fake_factory
+from fastapi.testclient import TestClient
+
+from backend.app import create_app
+from backend.settings import Settings
+
+
+def make_client(tmp_path: Path, cfg, factory=None, **settings) -> TestClient:
+    s = Settings(data_dir=tmp_path / "data", **settings)
+    return TestClient(create_app(s, cfg, loop_factory=factory or fake_factory()))
+
+
+def wait_status(c: TestClient, run_id: str, statuses: set[str], timeout: float = 20.0) -> dict:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        body = c.get(f"/api/runs/{run_id}").json()
+        if body["status"] in statuses:
+            return body
+        time.sleep(0.05)
+    raise AssertionError(f"run {run_id} never reached {statuses}: {body['status']}")
+
+
+def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg) as c:
+        assert c.get("/api/health").json()["status"] == "ok"
+        r = c.post("/api/runs", json={"duration": 6.0, "speed": 5.0,
+                                      "reference": {"setpoint": 900.0, "t_E": 3.0}})
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
+        frames = []
+        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+            changed_ref = changed_osc = False
+            while True:
+                try:
+                    f = json.loads(ws.receive_text())
+                except Exception:
+                    break
+                frames.append(f)
+                if not changed_ref and f["t"] >= 1.0:
+                    ch = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1000.0, "t_E": 1.5})
+                    assert ch.status_code == 200, ch.text
+                    assert ch.json()["status"] == "applied"
+                    changed_ref = True
+                if not changed_osc and f["t"] >= 2.0:
+                    ch = c.put(f"/api/runs/{run_id}/oscillation",
+                               json={"enabled": True, "amplitude": 0.03, "period": 1.0})
+                    assert ch.status_code == 200, ch.text
+                    changed_osc = True
+        keys = {"t", "eta", "T_ref", "T_mean_hat", "field", "tc", "tc_hat", "u", "u_ff", "inhomogeneity"}
+        assert keys <= frames[0].keys()
+        ny, nx = small_cfg.specimen.ny, small_cfg.specimen.nx
+        assert len(frames[0]["field"]) == ny and len(frames[0]["field"][0]) == nx
+        # the fake reference ramps to 900 K by t_E = 3 s; after the change it heads to 1000 K
+        assert max(f["T_ref"] for f in frames) == pytest.approx(1000.0)
+        assert all(f["eta"] == 0.0 for f in frames if f["t"] < 2.0)
+        # amplitude 0.03 m, period 1 s: samples every 0.1 s reach |eta| >= 0.03 sin(0.4 pi) = 0.0285 m
+        assert max(abs(f["eta"]) for f in frames) > 0.028
+        assert frames[-1]["status"] == "finished"
+        body = wait_status(c, run_id, {"finished"})
+        assert [ch["kind"] for ch in body["changes"]] == ["reference", "oscillation"]
+        assert all(ch["status"] == "applied" for ch in body["changes"])
+        assert body["files"] == {"recording": True, "timeseries": True, "metrics": True}
+        assert body["latest"]["t"] == pytest.approx(6.0)
+        m = c.get(f"/api/runs/{run_id}/metrics")
+        assert m.status_code == 200 and "mean_error_transient_max" in m.json()
+        ts = c.get(f"/api/runs/{run_id}/timeseries")
+        assert ts.status_code == 200
+        npz = np.load(__import__("io").BytesIO(ts.content))
+        assert npz["t"][-1] == pytest.approx(6.0) and json.loads(str(npz["scenario"]))["duration"] == 6.0
+        assert c.get(f"/api/runs/{run_id}/recording").content[:4] == b"RRF2"  # rerun file magic
+        # the run is over: controls answer 409
+        assert c.post(f"/api/runs/{run_id}/stop").status_code == 409
+        assert c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": False}).status_code == 409
+        listed = c.get("/api/runs").json()
+        assert [r["id"] for r in listed] == [run_id]
+
+
+def test_stop_keeps_data(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg) as c:
+        run_id = c.post("/api/runs", json={"duration": 600.0, "speed": 2.0}).json()["id"]
+        wait_status(c, run_id, {"running"})
+        time.sleep(0.5)
+        r = c.post(f"/api/runs/{run_id}/stop")
+        assert r.status_code == 202 and r.json()["status"] == "stopping"
+        body = wait_status(c, run_id, {"stopped"})
+        # speed 2 for ~0.5 s: about 1 simulated second, far from the 600 s duration
+        assert 0.0 < body["latest"]["t"] < 10.0
+        assert body["files"]["timeseries"] and body["ended_at"] is not None
+
+
+def test_404s(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg) as c:
+        for method, path, body in [
+            ("get", "/api/runs/abc123", None), ("post", "/api/runs/abc123/stop", None),
+            ("put", "/api/runs/abc123/reference", {"setpoint": 1000.0}),
+            ("put", "/api/runs/abc123/oscillation", {"enabled": True}),
+            ("get", "/api/runs/abc123/metrics", None), ("get", "/api/runs/abc123/recording", None),
+            ("get", "/api/runs/abc123/timeseries", None), ("get", "/api/runs/..%2F..%2Fetc/recording", None),
+        ]:
+            r = getattr(c, method)(path, **({"json": body} if body else {}))
+            assert r.status_code == 404, (path, r.status_code)
+            assert "detail" in r.json()
+        from starlette.testclient import WebSocketDenialResponse
+
+        with pytest.raises(WebSocketDenialResponse) as exc:
+            with c.websocket_connect("/api/runs/abc123/stream"):
+                pass
+        assert exc.value.status_code == 404
+
+
+def test_422s_name_the_field(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg, max_duration_s=100.0, max_speed=10.0) as c:
+        cases = [
+            ({"duration": -1}, "duration"),
+            ({"speed": "fast"}, "speed"),
+            ({"tc4": [2.0, 0.5]}, "tc4"),
+            ({"reference": {"setpoint": 5000.0}}, "setpoint"),
+            ({"oscillation": {"amplitude": 1.0}}, "amplitude"),
+            ({"bogus": 1}, "bogus"),
+            ({"duration": 200.0}, "duration"),  # over this server's limit of 100 s
+            ({"speed": 50.0, "duration": 10.0}, "speed"),  # over this server's limit of 10
+        ]
+        for body, field in cases:
+            r = c.post("/api/runs", json=body)
+            assert r.status_code == 422, (body, r.text)
+            assert field in r.text, (body, r.text)
+        assert c.post("/api/runs", content=b"{not json", headers={"content-type": "application/json"}
+                      ).status_code == 422
+        run_id = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0}).json()["id"]
+        wait_status(c, run_id, {"running"})
+        r = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 100.0})
+        assert r.status_code == 422 and "setpoint" in r.text
+        r = c.put(f"/api/runs/{run_id}/oscillation", json={"period": 0.0})
+        assert r.status_code == 422 and "period" in r.text
+        # the fake loop refuses setpoints above 1250 K: the worker's ValueError becomes a 422
+        r = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1280.0})
+        assert r.status_code == 422 and "unreachable" in r.text
+        assert c.get(f"/api/runs/{run_id}").json()["status"] == "running"  # the run goes on
+        assert c.get(f"/api/runs/{run_id}/metrics").status_code == 409  # no metrics while running
+        c.post(f"/api/runs/{run_id}/stop")
+
+
+def test_429_past_concurrent_runs(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg, max_concurrent_runs=2) as c:
+        ids = [c.post("/api/runs", json={"duration": 600.0, "speed": 1.0}).json()["id"] for _ in range(2)]
+        r = c.post("/api/runs", json={"duration": 10.0})
+        assert r.status_code == 429 and "2 at once" in r.json()["detail"]
+        c.post(f"/api/runs/{ids[0]}/stop")
+        wait_status(c, ids[0], {"stopped"})
+        assert c.post("/api/runs", json={"duration": 1.0}).status_code == 201
+        c.post(f"/api/runs/{ids[1]}/stop")
+
+
+def test_token_guards_every_mutating_endpoint(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg, api_token="s3cret") as c:
+        assert c.get("/api/health").json()["auth_required"] is True
+        assert c.post("/api/runs", json={"duration": 1.0}).status_code == 401
+        assert c.post("/api/runs", json={"duration": 1.0}, headers={"X-API-Token": "nope"}).status_code == 401
+        ok = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0},
+                    headers={"Authorization": "Bearer s3cret"})
+        assert ok.status_code == 201
+        run_id = ok.json()["id"]
+        assert c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1000.0}).status_code == 401
+        assert c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": True}).status_code == 401
+        assert c.post(f"/api/runs/{run_id}/stop").status_code == 401
+        assert c.get(f"/api/runs/{run_id}").status_code == 200  # reading needs no token
+        assert c.post(f"/api/runs/{run_id}/stop", headers={"X-API-Token": "s3cret"}).status_code == 202
+
+
+def test_dashboard_and_plotly_are_served_locally(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg) as c:
+        page = c.get("/")
+        assert page.status_code == 200 and "/assets/plotly.min.js" in page.text
+        assert "cdn" not in page.text.lower()
+        js = c.get("/assets/plotly.min.js")
+        assert js.status_code == 200 and len(js.content) > 1_000_000  # the full bundle is ~4.6 MB
+        assert c.get("/assets/..%2Fpyproject.toml").status_code == 404
+        assert c.get("/assets/nothing.js").status_code == 404
+        furnace = c.get("/api/furnace").json()
+        assert furnace["nx"] == small_cfg.specimen.nx and len(furnace["groups"]) == 6
