@@ -1,0 +1,31 @@
+"""Shared test fixtures: the test radiation cache (computed once, reused by every test run)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+TEST_RADIATION_CACHE = REPO / ".cache" / "test-radiation"
+
+# set at import so that subprocesses and module-level code see it too
+os.environ["FURNACE_TWIN_CACHE"] = str(TEST_RADIATION_CACHE)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def radiation_cache() -> Path:
+    """The F^s cache directory of the test suite (``<repo>/.cache/test-radiation``)."""
+    os.environ["FURNACE_TWIN_CACHE"] = str(TEST_RADIATION_CACHE)
+    TEST_RADIATION_CACHE.mkdir(parents=True, exist_ok=True)
+    return TEST_RADIATION_CACHE
+
+
+@pytest.fixture(scope="session")
+def small_radiation(radiation_cache):
+    """``radiation_model(small_config())`` from the test cache (ray-traced on first use)."""
+    from twin.config import small_config
+    from twin.radiation import radiation_model
+
+    return radiation_model(small_config(), cache_dir=radiation_cache)
