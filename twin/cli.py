@@ -12,6 +12,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 log = logging.getLogger("twin")
 
@@ -69,6 +70,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _recording_sink(cfg: Any) -> Any:
+    """Factory of the rerun recording (``recording.rrd``) of a headless run; twin never imports rerun."""
+
+    def make(out: Any, loop: Any) -> Any:
+        from backend.recording import RecordingSink
+
+        return RecordingSink(
+            cfg, out.name or "run", out / "recording.rrd", tc_positions=[tuple(p) for p in loop.tc_positions]
+        )
+
+    return make
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(
@@ -95,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "run":
             from twin.runner import run_command
 
-            return run_command(cfg, args)
+            return run_command(cfg, args, sink_factories=[_recording_sink(cfg)])
         if args.command == "campaign":
             from twin.campaign import campaign_command
 

@@ -29,7 +29,9 @@ log = logging.getLogger(__name__)
 class SnapshotSink(Protocol):
     """Consumes snapshots of one run (a rerun recording, a viser scene, ...)."""
 
-    def log(self, snap: Snapshot) -> None: ...
+    def add(self, snap: Snapshot) -> None: ...
+
+    def flush(self) -> None: ...
 
     def close(self) -> None: ...
 
@@ -80,9 +82,11 @@ def execute_run(
     try:
         for snap in loop.run():
             for sink in sinks:
-                sink.log(snap)
+                sink.add(snap)
             if snap.j % flush_every == 0 and snap.j > 0:
                 save_timeseries(out / "timeseries.npz", loop.timeseries())
+                for sink in sinks:
+                    sink.flush()
     finally:
         ts = loop.timeseries()
         save_timeseries(out / "timeseries.npz", ts)
