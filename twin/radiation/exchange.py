@@ -1,0 +1,121 @@
+"""Exchange-factor tables F^s(eta_n) of the furnace at the N_eta + 1 positions (paper section 2.1).
+
+``eta_n = -eta_bar + (n - 1) d_eta``, ``d_eta = 2 eta_bar / N_eta`` (paper, before eq. 4).
+Each position is ray-traced (:mod:`twin.radiation.raytrace`) with its own child seed of
+``radiation.seed`` (so the table does not depend on the number of workers), then made
+reciprocal and closed (:mod:`twin.radiation.reciprocity`).  Positions run in up to two
+worker processes, because Embree through embreex traces on one core per call.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.config import FurnaceConfig
+from twin.geometry import FurnaceGeometry, furnace_geometry
+from twin.radiation.raytrace import trace_exchange_factors
+from twin.radiation.reciprocity import enforce_reciprocity_closure
+
+log = logging.getLogger(__name__)
+Array = NDArray[np.float64]
+
+#: worker processes for the positions (the furnace machine has 2 cores)
+MAX_WORKERS = 2
+
+
+def eta_nodes(cfg: FurnaceConfig) -> Array:
+    """Table positions eta_n (m), equally spaced on [-eta_bar, eta_bar]; [0] without oscillation."""
+    o = cfg.oscillation
+    if o.eta_max == 0 or o.positions == 1:
+        return np.zeros(1)
+    return np.linspace(-o.eta_max, o.eta_max, o.positions)
+
+
+def rays_per_surface(cfg: FurnaceConfig, geo: FurnaceGeometry) -> NDArray[np.int64]:
+    """Rays emitted by each surface: ``radiation.rays_per_{specimen_cell,wall,lamp}``."""
+    r = cfg.radiation
+    return np.concatenate(
+        [
+            np.full(2 * geo.n_specimen, r.rays_per_specimen_cell),
+            np.full(geo.n_walls, r.rays_per_wall),
+            np.full(geo.n_lamps, r.rays_per_lamp),
+        ]
+    ).astype(np.int64)
+
+
+def _trace_position(cfg: FurnaceConfig, eta: float, seed: np.random.SeedSequence) -> tuple[Array, str, bool]:
+    geo = furnace_geometry(cfg, eta)
+    r = cfg.radiation
+    F, stats = trace_exchange_factors(
+        geo.enclosure,
+        rays_per_surface(cfg, geo),
+        max_bounces=r.max_specular_bounces,
+        min_weight=r.min_ray_weight,
+        rng=np.random.default_rng(seed),
+    )
+    G, fix = enforce_reciprocity_closure(F, geo.area, geo.specular_reflectivity)
+    msg = (
+        f"eta={eta:+.4f} m: {stats.rays} rays, {stats.segments} segments, escaped {stats.escaped_fraction:.2e}, "
+        f"truncated {stats.truncated_fraction:.2e}; fix-up: closure defect {fix.closure_defect_before:.2e} -> "
+        f"{fix.closure_defect_after:.1e}, max relative change {fix.max_relative_change:.3f} ({fix.rounds} rounds)"
+    )
+    return G, msg, stats.escaped_weight > 0
+
+
+def _report(msg: str, escaped: bool) -> None:
+    if escaped:
+        log.warning("rays escaped the closed enclosure (geometry bug?): %s", msg)
+    else:
+        log.info("%s", msg)
+
+
+def exchange_factors_at(cfg: FurnaceConfig, eta: float, seed: np.random.SeedSequence) -> Array:
+    """Reciprocal, closed F^s (n, n) of the furnace at one position eta (m), eq. (5)."""
+    G, msg, escaped = _trace_position(cfg, eta, seed)
+    _report(msg, escaped)
+    return G
+
+
+def _worker(args: tuple[FurnaceConfig, float, np.random.SeedSequence]) -> tuple[Array, str, bool]:
+    return _trace_position(*args)
+
+
+def exchange_factor_table(
+    cfg: FurnaceConfig, *, workers: int | None = None, on_position: Callable[[], None] | None = None
+) -> tuple[Array, Array]:
+    """F^s at every table position.
+
+    Returns
+    -------
+    eta : (n_eta,) m
+    F : (n_eta, n, n)
+    """
+    etas = eta_nodes(cfg)
+    seeds = np.random.SeedSequence(cfg.radiation.seed).spawn(len(etas))
+    jobs = [(cfg, float(e), s) for e, s in zip(etas, seeds, strict=True)]
+    n_workers = workers if workers is not None else min(MAX_WORKERS, len(etas), os.cpu_count() or 1)
+    out: list[Array] = []
+    if n_workers <= 1:
+        for job in jobs:
+            out.append(exchange_factors_at(*job))
+            if on_position:
+                on_position()
+    else:
+        # fork: the children must not re-import ``__main__`` (spawn would, and a script that
+        # builds the radiation model at import would then wait on its own cache lock);
+        # they only run numpy/Embree and never log.
+        ctx = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
+            for F, msg, escaped in pool.map(_worker, jobs):
+                _report(msg, escaped)
+                out.append(F)
+                if on_position:
+                    on_position()
+    return etas, np.stack(out)
