@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, status
+from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse
 
 from backend.deps import ManagerDep, RepoDep
+from backend.series import load_series
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
 
@@ -38,3 +40,14 @@ def timeseries(run_id: str, manager: ManagerDep, repo: RepoDep) -> FileResponse:
     """The raw time series (``.npz``, layout in product.md), flushed every few seconds while running."""
     path = _file(run_id, manager, repo, "timeseries")
     return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")
+
+
+@router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
+def series(run_id: str, manager: ManagerDep, repo: RepoDep,
+           max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> dict[str, Any]:
+    """The stored time series as JSON (decimated to ``max_points``) for charts of any run."""
+    path = _file(run_id, manager, repo, "timeseries")
+    try:
+        return load_series(path, max_points)
+    except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read {path.name}: {exc}") from None

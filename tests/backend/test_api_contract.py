@@ -185,10 +185,33 @@ def test_dashboard_and_plotly_are_served_locally(tmp_path, small_cfg) -> None:
     with make_client(tmp_path, small_cfg) as c:
         page = c.get("/")
         assert page.status_code == 200 and "/assets/plotly.min.js" in page.text
-        assert "cdn" not in page.text.lower()
+        assert 'src="http' not in page.text and 'href="http' not in page.text  # nothing from the internet
         js = c.get("/assets/plotly.min.js")
         assert js.status_code == 200 and len(js.content) > 1_000_000  # the full bundle is ~4.6 MB
         assert c.get("/assets/..%2Fpyproject.toml").status_code == 404
         assert c.get("/assets/nothing.js").status_code == 404
         furnace = c.get("/api/furnace").json()
         assert furnace["nx"] == small_cfg.specimen.nx and len(furnace["groups"]) == 6
+
+
+def test_real_time_factor_paces_the_samples(tmp_path, small_cfg) -> None:
+    """speed 2: simulated time advances twice as fast as the wall clock (sample wall stamps)."""
+    with make_client(tmp_path, small_cfg) as c:
+        run_id = c.post("/api/runs", json={"duration": 4.0, "speed": 2.0}).json()["id"]
+        frames = []
+        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+            while True:
+                try:
+                    frames.append(json.loads(ws.receive_text()))
+                except Exception:
+                    break
+        live = [f for f in frames if f["status"] == "running"]
+        sim = live[-1]["t"] - live[0]["t"]
+        wall = live[-1]["wall_time"] - live[0]["wall_time"]
+        assert sim > 3.0  # nearly the whole 4 s run was streamed
+        # pacing is absolute (origin + t / speed), so the error does not grow with the run;
+        # 0.15 s covers one scheduling delay of the event loop on a loaded 2-core machine
+        assert abs(wall - sim / 2.0) < 0.15, (wall, sim)
+        # at 10 samples per simulated second x 2 = 20 samples/s, frames are capped at 20/s
+        rate = (len(live) - 1) / wall
+        assert 15.0 < rate <= 21.0, rate

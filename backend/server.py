@@ -1,0 +1,68 @@
+"""``furnace-twin serve``: dashboard, REST API, websocket stream and viser 3D view in one process.
+
+uvicorn serves the FastAPI app on ``host:port`` (loopback by default); the viser server runs
+in the same process on its own port and thread.  The radiation model is loaded (or
+ray-traced once and cached) in the background at start, so the first run starts quickly.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import threading
+from pathlib import Path
+
+from backend.app import create_app
+from backend.run_manager import DefaultLoopFactory
+from backend.settings import DEFAULT_DATA_DIR, Settings
+from twin.config import FurnaceConfig
+
+log = logging.getLogger(__name__)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def serve(
+    cfg: FurnaceConfig,
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    viser_port: int = 8080,
+    data_dir: str | Path | None = None,
+) -> int:
+    """Run the server until interrupted; returns the process exit status.
+
+    A non-loopback ``host`` is refused unless an API token is set
+    (``FURNACE_TWIN_API_TOKEN``), so the furnace is never controllable from the network
+    without one.
+    """
+    import uvicorn
+
+    settings = Settings(  # type: ignore[call-arg]  # the rest from defaults / environment
+        data_dir=Path(data_dir) if data_dir else DEFAULT_DATA_DIR, host=host, port=port, viser_port=viser_port
+    )
+    if not is_loopback(host) and not settings.api_token:
+        log.error("refusing to listen on %s without an API token: set FURNACE_TWIN_API_TOKEN "
+                  "(or keep the default 127.0.0.1)", host)
+        return 2
+    factory = DefaultLoopFactory()
+    threading.Thread(target=_warm_up, args=(factory, cfg), name="radiation-warm-up", daemon=True).start()
+    app = create_app(settings, cfg, loop_factory=factory, viser=True)
+    log.info("dashboard on http://%s:%d/ , data in %s", host, port, settings.data_dir.resolve())
+    server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="info"))
+    server.run()
+    return 0
+
+
+def _warm_up(factory: DefaultLoopFactory, cfg: FurnaceConfig) -> None:
+    try:
+        factory.radiation(cfg)
+        log.info("radiation model ready")
+    except Exception:
+        log.exception("loading the radiation model failed; runs will retry")
