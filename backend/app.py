@@ -15,6 +15,7 @@ from pathlib import Path
 from fastapi import FastAPI, HTTPException, Request, status
 from fastapi.responses import FileResponse, JSONResponse
 
+from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
 from backend.routes import files, health, runs, stream
 from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
@@ -58,9 +59,7 @@ def create_app(
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.runs_dir.mkdir(parents=True, exist_ok=True)
         repo = RunRepository(settings.db_path)
-        interrupted = repo.mark_interrupted()
-        if interrupted:
-            log.warning("runs interrupted by the last shutdown: %s", ", ".join(interrupted))
+        recover_interrupted(repo, settings.runs_dir)
         manager = RunManager(settings, cfg, repo, loop_factory)
         app.state.settings, app.state.repo, app.state.manager = settings, repo, manager
         app.state.viser_url = None

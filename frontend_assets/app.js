@@ -12,6 +12,7 @@ const state = {
 };
 
 const $ = (id) => document.getElementById(id);
+const pct = (v, d = 2) => (v === null || v === undefined || Number.isNaN(v) ? "–" : (100 * v).toFixed(d));
 const fmt = (v, d = 1) => (v === null || v === undefined || Number.isNaN(v) ? "–" : Number(v).toFixed(d));
 
 function token() { return localStorage.getItem("furnace-twin-token") || ""; }
@@ -191,7 +192,7 @@ function renderRunInfo(run) {
   const m = run.metrics || {};
   const sc = run.scenario;
   const ref = sc.reference.points ? `${sc.reference.points.length} points` : `${sc.reference.setpoint} K in ${sc.reference.t_E} s`;
-  const rows = Object.entries(m).map(([k, v]) => `<tr><td>${k}</td><td class="num">${fmt(v, 2)}</td></tr>`).join("");
+  const rows = Object.entries(m).map(([k, v]) => `<tr><td>${k}</td><td class="num">${pct(v)} %</td></tr>`).join("");
   const files = run.files || {};
   const links = [
     files.recording ? `<a href="${run.links.recording}" download>recording.rrd</a>` : "",
@@ -202,7 +203,7 @@ function renderRunInfo(run) {
     <div><b>${run.id}</b> · ${run.status}${run.error ? ` · <span style="color:#c53030">${run.error}</span>` : ""}</div>
     <div class="muted">reference ${ref} · ${sc.duration} s · speed ${sc.speed} · oscillation ${currentOscillation(run).enabled ? "on" : "off"} · TC4 (${sc.tc4.join(", ")})</div>
     <div>${links}</div>
-    ${rows ? `<table>${rows}</table>` : `<div class="muted">metrics when the run ends (K)</div>`}`;
+    ${rows ? `<div class="muted">metrics, relative to the setpoint</div><table>${rows}</table>` : `<div class="muted">metrics when the run ends</div>`}`;
 }
 
 async function refreshRun() {
@@ -272,7 +273,7 @@ async function refreshHistory() {
     const m = r.metrics || {};
     tr.innerHTML = `<td title="${new Date(r.created_at * 1000).toLocaleString()}">${r.id.slice(0, 6)}${r.scenario.oscillation.enabled ? " ↕" : ""}</td>
       <td><span class="badge ${r.status}" style="color:#fff">${r.status}</span></td>
-      <td class="num">${fmt(m.mean_error_steady_max, 1)}</td><td class="num">${fmt(m.inhomogeneity_steady, 1)}</td>
+      <td class="num">${pct(m.mean_error_steady_max)}</td><td class="num">${pct(m.inhomogeneity_steady)}</td>
       <td><a href="${r.links.recording}" title="rerun recording" download>rrd</a><a href="${r.links.timeseries}" title="raw time series" download>npz</a></td>`;
     tr.addEventListener("click", (ev) => { if (ev.target.tagName !== "A") selectRun(r.id); });
     tb.appendChild(tr);
