@@ -53,14 +53,15 @@ def rays_per_surface(cfg: FurnaceConfig, geo: FurnaceGeometry) -> NDArray[np.int
 def _trace_position(cfg: FurnaceConfig, eta: float, seed: np.random.SeedSequence) -> tuple[Array, str, bool]:
     geo = furnace_geometry(cfg, eta)
     r = cfg.radiation
+    rays = rays_per_surface(cfg, geo)
     F, stats = trace_exchange_factors(
         geo.enclosure,
-        rays_per_surface(cfg, geo),
+        rays,
         max_bounces=r.max_specular_bounces,
         min_weight=r.min_ray_weight,
         rng=np.random.default_rng(seed),
     )
-    G, fix = enforce_reciprocity_closure(F, geo.area, geo.specular_reflectivity)
+    G, fix = enforce_reciprocity_closure(F, geo.area, geo.specular_reflectivity, rays=rays)
     msg = (
         f"eta={eta:+.4f} m: {stats.rays} rays, {stats.segments} segments, escaped {stats.escaped_fraction:.2e}, "
         f"truncated {stats.truncated_fraction:.2e}; fix-up: closure defect {fix.closure_defect_before:.2e} -> "

@@ -78,36 +78,37 @@ class _Emitter:
         order = np.argsort(enc.face_surface, kind="stable")
         self.face_of = order
         surf = enc.face_surface[order]
-        a = enc.face_areas[order]
-        cum = np.cumsum(a)
+        cum = np.cumsum(enc.face_areas[order])
         start = np.searchsorted(surf, np.arange(enc.n_surfaces))
         before = np.concatenate([[0.0], cum])[start]
-        # global cdf: surface s occupies (s, s + 1]
+        # global cdf: the faces of surface s share the interval (s, s + 1] by area
         self.cdf = surf + (cum - before[surf]) / enc.area[surf]
         self.cdf[np.r_[start[1:] - 1, len(cum) - 1]] = np.arange(enc.n_surfaces) + 1.0
         V, F = enc.vertices, enc.faces
-        self.p0 = V[F[:, 0]]
-        self.e1 = V[F[:, 1]] - self.p0
-        self.e2 = V[F[:, 2]] - self.p0
-        self.n = enc.face_normals
-        t1 = self.e1 / np.linalg.norm(self.e1, axis=1)[:, None]
-        self.t1 = t1
-        self.t2 = np.cross(self.n, t1)
+        p0 = V[F[:, 0]]
+        e1, e2 = V[F[:, 1]] - p0, V[F[:, 2]] - p0
+        n = enc.face_normals
+        t1 = e1 / np.linalg.norm(e1, axis=1)[:, None]
+        t2 = np.cross(n, t1)
+        # per face: origin (offset off the surface), two edges, tangent frame and normal
+        self.basis = np.stack([p0 + RAY_OFFSET * n, e1, e2, t1, t2, n], axis=1).astype(np.float32)
 
-    def sample(self, src: NDArray[np.int64], rng: np.random.Generator) -> tuple[Array, Array]:
+    def sample(self, src: NDArray[np.int64], rng: np.random.Generator) -> tuple[NDArray[np.float32], ...]:
+        """Origins and unit directions (float32, (m, 3)) of rays leaving the surfaces ``src``."""
         m = len(src)
-        k = np.searchsorted(self.cdf, src + rng.random(m) * (1 - 1e-12) + 1e-12)
-        tri = self.face_of[np.minimum(k, len(self.face_of) - 1)]
-        r1, r2 = rng.random(m), rng.random(m)
+        u = rng.random((5, m), dtype=np.float32)
+        k = np.searchsorted(self.cdf, src + np.clip(u[0], 1e-6, 1 - 1e-6))
+        B = self.basis[self.face_of[np.minimum(k, len(self.face_of) - 1)]]
+        r1, r2 = u[1], u[2]
         flip = r1 + r2 > 1
         r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
-        pts = self.p0[tri] + r1[:, None] * self.e1[tri] + r2[:, None] * self.e2[tri]
-        u1, u2 = rng.random(m), rng.random(m)
-        r, phi = np.sqrt(u1), 2 * np.pi * u2
-        n = self.n[tri]
-        d = (r * np.cos(phi))[:, None] * self.t1[tri] + (r * np.sin(phi))[:, None] * self.t2[tri]
-        d += np.sqrt(1 - u1)[:, None] * n
-        return pts + RAY_OFFSET * n, d
+        rad, phi = np.sqrt(u[3]), np.float32(2 * np.pi) * u[4]
+        coef = np.empty((m, 6), np.float32)
+        coef[:, 0], coef[:, 1], coef[:, 2] = 1.0, r1, r2
+        coef[:, 3], coef[:, 4], coef[:, 5] = rad * np.cos(phi), rad * np.sin(phi), np.sqrt(1 - u[3])
+        pts = np.einsum("mk,mkj->mj", coef[:, :3], B[:, :3])
+        d = np.einsum("mk,mkj->mj", coef[:, 3:], B[:, 3:])
+        return pts, d
 
 
 def trace_exchange_factors(
@@ -141,7 +142,8 @@ def trace_exchange_factors(
     emitter = _Emitter(enc)
     rho_s = enc.specular_reflectivity
     face_surface = enc.face_surface
-    normals = enc.face_normals
+    normals = enc.face_normals.astype(np.float32)
+    offset = np.float32(RAY_OFFSET)
     counts = np.asarray(rays_per_surface, np.int64)
     acc = np.zeros(n * n)
     escaped = truncated = 0.0
@@ -154,7 +156,7 @@ def trace_exchange_factors(
         for bounce in range(max_bounces + 1):
             if len(src) == 0:
                 break
-            res = scene.run(orig.astype(np.float32), d.astype(np.float32), output=1)
+            res = scene.run(orig, d, output=1)
             tri = res["primID"].astype(np.int64)
             segments += len(src)
             miss = tri < 0
@@ -180,10 +182,10 @@ def trace_exchange_factors(
             src, orig, d, w, tri, tfar = src[alive], orig[alive], d[alive], w[alive], tri[alive], tfar[alive]
             nrm = normals[tri]
             dn = np.einsum("ij,ij->i", d, nrm)
-            hit = orig + tfar[:, None].astype(np.float64) * d
+            hit = orig + tfar[:, None] * d
             d = d - 2 * dn[:, None] * nrm
-            side = np.where(dn < 0, 1.0, -1.0)  # the reflected ray leaves on the side it came from
-            orig = hit + (RAY_OFFSET * side)[:, None] * nrm
+            side = np.where(dn < 0, offset, -offset)  # the reflected ray leaves on the side it came from
+            orig = hit + side[:, None] * nrm
         if progress is not None:
             progress(n_chunk)
     F = acc.reshape(n, n) / np.maximum(counts, 1)[:, None]

@@ -5,7 +5,13 @@ Monte Carlo estimates of the specular exchange factors F^s satisfy reciprocity
 sampling noise.  The net-radiation matrices of eq. (5) need both (otherwise an
 isothermal enclosure would exchange net heat), so they are enforced here:
 
-1. symmetrise the exchange areas, ``S = (A F + (A F)^T) / 2``;
+1. symmetrise the exchange areas.  Without ray counts ``S = (A F + (A F)^T) / 2``.  With
+   the rays N_i emitted per surface, the two estimates A_i F_ij and A_j F_ji are
+   combined with inverse-variance weights: a Monte Carlo estimate of A_i F_ij from N_i
+   rays has variance ~ A_i^2 F_ij / N_i = A_i S_ij / N_i, so the weights are the ray
+   densities N_i / A_i and N_j / A_j.  This matters where one side is sampled far more
+   densely (a 0.17 m^2 reflector with 6e4 rays against a 1.8e-4 m^2 cell with 6e3
+   rays: the plain mean would have ~25x the variance of the cell-side estimate);
 2. rescale symmetrically, ``S <- D S D`` with a positive diagonal D found by a few
    rounds of square-root diagonal balancing, until every row satisfies
    ``sum_j S_ij (1 - rho^s_j) = A_i``;
@@ -23,6 +29,7 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,7 +49,13 @@ class FixUp:
 
 
 def enforce_reciprocity_closure(
-    F: Array, area: Array, specular_reflectivity: Array, *, tol: float = 1e-10, max_rounds: int = 200
+    F: Array,
+    area: Array,
+    specular_reflectivity: Array,
+    *,
+    rays: NDArray[Any] | None = None,
+    tol: float = 1e-10,
+    max_rounds: int = 200,
 ) -> tuple[Array, FixUp]:
     """Exchange factors with exact reciprocity and closure, close to the estimate ``F``.
 
@@ -51,6 +64,7 @@ def enforce_reciprocity_closure(
     F : (n, n) raw arriving fractions F^s
     area : (n,) surface areas A_i (m^2)
     specular_reflectivity : (n,) rho^s
+    rays : (n,) rays emitted per surface, for inverse-variance weighting (plain mean if None)
     tol : closure tolerance on every row
     max_rounds : balancing rounds at most
 
@@ -63,7 +77,13 @@ def enforce_reciprocity_closure(
     b = 1.0 - np.asarray(specular_reflectivity, float)
     before = float(np.max(np.abs(F @ b - 1.0)))
     AF = A[:, None] * F
-    S = 0.5 * (AF + AF.T)
+    if rays is None:
+        S = 0.5 * (AF + AF.T)
+    else:
+        dens = np.asarray(rays, float) / A
+        S = (dens[:, None] * AF + dens[None, :] * AF.T) / (dens[:, None] + dens[None, :])
+    if np.any(S.sum(axis=1) <= 0):
+        raise ValueError(f"surfaces that exchange nothing: {np.flatnonzero(S.sum(axis=1) <= 0).tolist()}")
     d = np.ones(len(A))
     rounds = 0
     for rounds in range(1, max_rounds + 1):  # noqa: B007
