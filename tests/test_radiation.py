@@ -122,6 +122,25 @@ def test_fixup_keeps_exact_factors_and_fixes_noisy_ones():
     assert info.closure_defect_before > 1e-3 and info.closure_defect_after < 1e-9
 
 
+def test_weighted_fixup_trusts_the_densely_sampled_side():
+    # Surface 0 is sampled 1e4x more densely than 1 and 2 (rays per area), so its row is taken
+    # nearly as is, while the plain mean inherits half of the +-20 % noise of rows 1 and 2.
+    S = np.array([[0.2, 0.5, 0.4], [0.5, 0.6, 0.9], [0.4, 0.9, 1.7]])
+    rho_s = np.zeros(3)
+    A = S @ (1 - rho_s)
+    F = S / A[:, None]
+    noisy = F.copy()
+    noisy[1:] *= np.random.default_rng(1).uniform(0.8, 1.2, (2, 3))
+    rays = np.array([1e6, 100.0, 100.0]) * A
+    G_w, _ = enforce_reciprocity_closure(noisy, A, rho_s, rays=rays)
+    G_p, _ = enforce_reciprocity_closure(noisy, A, rho_s)
+    err_w = np.max(np.abs(G_w[0] - F[0]) / F[0])
+    err_p = np.max(np.abs(G_p[0] - F[0]) / F[0])
+    assert err_w < 0.5 * err_p
+    np.testing.assert_allclose(A[:, None] * G_w, (A[:, None] * G_w).T, rtol=1e-12)
+    np.testing.assert_allclose(G_w @ (1 - rho_s), 1.0, atol=1e-9)
+
+
 # ---- the furnace (small config, cached table) ----
 
 

@@ -107,6 +107,7 @@ def load_or_compute(
             return _load(path, optics)
         except (OSError, ValueError, KeyError) as exc:
             log.warning("unreadable radiation cache %s (%s); recomputing", path, exc)
+            force = True
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path.with_suffix(".lock"), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # a concurrent process computing the same table finishes first

@@ -26,6 +26,8 @@ from twin.radiation.reciprocity import enforce_reciprocity_closure
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
+#: escaped fraction of the ray weight above which the enclosure is reported as leaking
+ESCAPE_WARNING = 1e-5
 #: worker processes for the positions (the furnace machine has 2 cores)
 MAX_WORKERS = 2
 
@@ -65,9 +67,12 @@ def _trace_position(cfg: FurnaceConfig, eta: float, seed: np.random.SeedSequence
     msg = (
         f"eta={eta:+.4f} m: {stats.rays} rays, {stats.segments} segments, escaped {stats.escaped_fraction:.2e}, "
         f"truncated {stats.truncated_fraction:.2e}; fix-up: closure defect {fix.closure_defect_before:.2e} -> "
-        f"{fix.closure_defect_after:.1e}, max relative change {fix.max_relative_change:.3f} ({fix.rounds} rounds)"
+        f"{fix.closure_defect_after:.1e}, exchange moved {fix.moved_fraction:.2%}, "
+        f"max relative change of an entry >= 1e-3 of its row {fix.max_relative_change:.2f} ({fix.rounds} rounds)"
     )
-    return G, msg, stats.escaped_weight > 0
+    # float32 hit points within ~1e-7 m of a chamber corner can put a reflected ray's origin
+    # outside the box: ~1e-7 of the weight is expected; more means an open enclosure
+    return G, msg, stats.escaped_fraction > ESCAPE_WARNING
 
 
 def _report(msg: str, escaped: bool) -> None:

@@ -40,9 +40,11 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class FixUp:
     """Size of the correction: max relative change of an entry that carries >= 1e-3 of its row,
-    max closure defect before and after, number of balancing rounds."""
+    exchanged energy moved (sum |A_i (G_ij - F_ij)| / sum A_i F_ij), max closure defect before
+    and after, number of balancing rounds."""
 
     max_relative_change: float
+    moved_fraction: float
     closure_defect_before: float
     closure_defect_after: float
     rounds: int
@@ -97,4 +99,5 @@ def enforce_reciprocity_closure(
     after = float(np.max(np.abs(G @ b - 1.0)))
     big = F > 1e-3 * np.maximum(F.sum(axis=1, keepdims=True), 1e-300)
     change = float(np.max(np.abs(G[big] - F[big]) / F[big])) if big.any() else 0.0
-    return G, FixUp(change, before, after, rounds)
+    moved = float(np.sum(np.abs(A[:, None] * (G - F))) / np.sum(AF))
+    return G, FixUp(change, moved, before, after, rounds)
