@@ -71,6 +71,7 @@ def _save(path: Path, table: ExchangeTable) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             np.savez(f, eta=table.eta, F=table.F, P1=table.P1, P2=table.P2)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; the cache is shared by every run of the user
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
