@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,6 +37,19 @@ from twin.config import FurnaceConfig
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
+
+_blas_controller: Any = None
+
+
+def single_threaded_blas() -> Any:
+    """Context manager limiting BLAS to one thread: the EKF's 100x100 products only lose from threads
+    on shared cores (measured 30 ms instead of 0.3 ms per predict on a loaded 2-core box)."""
+    global _blas_controller
+    if _blas_controller is None:
+        from threadpoolctl import ThreadpoolController
+
+        _blas_controller = ThreadpoolController()
+    return _blas_controller.limit(limits=1, user_api="blas")
 
 
 class Dynamics(Protocol):
@@ -99,7 +112,8 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     """
     yv = np.asarray(y, float)
     innov = yv - C @ state.theta
-    S_full = C @ state.P @ C.T + R
+    PCt_full = state.P @ C.T
+    S_full = C @ PCt_full + R
     normalized = np.abs(innov) / np.sqrt(np.diag(S_full))
     finite = np.isfinite(yv)
     used = finite & (normalized <= gate)
@@ -111,8 +125,8 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     if not used.any():
         return state, info
     Cu, Ru, nu = C[used], R[np.ix_(used, used)], innov[used]
-    PCt = state.P @ Cu.T
-    S = Cu @ PCt + Ru
+    PCt = PCt_full[:, used]
+    S = S_full[np.ix_(used, used)]
     gain = np.linalg.solve(S, PCt.T).T  # P C^T S^{-1}, S symmetric
     theta = state.theta + gain @ nu
     # Joseph form (I - K C) P (I - K C)^T + K R K^T in O(n^2 p): A1 = (I - K C) P, C P = (P C^T)^T
@@ -155,13 +169,15 @@ class Estimator:
 
     def update(self, y: ArrayLike) -> EKFState:
         """Measurement update (13) with the readings of TC1..3 (K); faulty readings are left out."""
-        self.state, self.last_info = ekf_update(self.state, y, self.C, self.R, self.gate)
+        with single_threaded_blas():
+            self.state, self.last_info = ekf_update(self.state, y, self.C, self.R, self.gate)
         self._updated = True
         return self.state
 
     def predict(self, u: ArrayLike) -> EKFState:
         """Propagate to the next sample (14), (15) with the group fractions u held over t_s."""
-        self.state = ekf_predict(self.model, self.state, u, self.Q)
+        with single_threaded_blas():
+            self.state = ekf_predict(self.model, self.state, u, self.Q)
         return self.state
 
     def step(self, y: ArrayLike, u_prev: ArrayLike) -> EKFState:
