@@ -91,3 +91,15 @@ def test_precompute_entry_points(tiny, tmp_path, monkeypatch, caplog):
     seconds = precompute_seconds(tiny)
     assert seconds > 0
     assert list(tmp_path.glob("*.npz")) == [cache_path(tiny)]  # the bench leaves no file behind
+
+
+def test_fixed_specimen_and_single_housing_section(tiny, tmp_path):
+    # no oscillation: one table position, weights [1] for any eta; one housing section holds all walls
+    cfg = tiny.with_overrides({"oscillation.eta_max": 0.0, "oscillation.positions": 1, "housing.sections": 1})
+    rad = radiation_model(cfg, cache_dir=tmp_path)
+    assert rad.eta_nodes.tolist() == [0.0] and rad.weights(0.01).tolist() == [1.0]
+    assert rad.wall_names == ("reflector_h", "reflector_v", "housing_1", "holder_upper", "holder_lower")
+    T = np.full(cfg.specimen.n_states, 600.0)
+    # isothermal enclosure exchanges nothing (reciprocity + closure), float32 storage ~1e-6
+    q = rad.flux(T, np.zeros(cfg.lamps.n_lamps), 0.0, T_w=np.full(5, 600.0))
+    assert np.max(np.abs(q)) < 1e-5 * 5.670374419e-8 * 600.0**4
