@@ -85,6 +85,39 @@ def test_specular_mirror_image():
     assert F[0, 0] == pytest.approx(rho * parallel_rectangles(a, a, 2 * h), rel=0.01)
 
 
+def test_emission_is_area_uniform_and_lambertian():
+    from twin.radiation.raytrace import RAY_OFFSET, _Emitter
+
+    cfg = small_config()
+    geo = furnace_geometry(cfg, 0.0)
+    enc = geo.enclosure
+    lamp = geo.names.index("h1")
+    n = 400_000
+    origins, dirs = _Emitter(enc).sample(np.full(n, lamp), np.random.default_rng(8))
+    # points on the two end caps (y = const) in proportion to their area: binomial, 5 sigma
+    own = enc.face_surface == lamp
+    caps = own & (np.abs(enc.face_normals[:, 1]) > 0.99)
+    expected = enc.face_areas[caps].sum() / enc.area[lamp]
+    h = cfg.lamps.horizontal
+    y_ends = cfg.specimen.width / 2 + np.array([-1, 1]) * h.heated_length / 2
+    on_cap = np.min(np.abs(origins[:, 1, None] - y_ends[None, :]), axis=1) < 2 * RAY_OFFSET
+    assert abs(on_cap.mean() - expected) < 5 * math.sqrt(expected / n)
+    # cosine-weighted directions about the normal of a front cell (+z): E[cos theta] = 2/3,
+    # E[cos^2 theta] = 1/2 (Lambert); std of the means <= 0.25 / sqrt(n) = 4e-4, bounds ~5 sigma
+    k = 3 + cfg.specimen.nx * 7
+    origins, dirs = _Emitter(enc).sample(np.full(n, k), np.random.default_rng(9))
+    cos = dirs[:, 2]
+    assert np.all(cos > 0)
+    assert np.mean(cos) == pytest.approx(2 / 3, abs=2e-3)
+    assert np.mean(cos**2) == pytest.approx(1 / 2, abs=2e-3)
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-5)
+    # points uniform over the cell: mean at the centre, variance dx^2 / 12 (both bounds >= 5 sigma)
+    dx = cfg.specimen.length / cfg.specimen.nx
+    assert origins[:, 0].mean() == pytest.approx(3.5 * dx, abs=0.01 * dx)
+    assert origins[:, 0].var() == pytest.approx(dx**2 / 12, rel=0.01)
+    assert np.allclose(origins[:, 2], cfg.specimen.thickness / 2 + RAY_OFFSET, atol=1e-7)
+
+
 def test_closed_box_has_no_escapes_and_closes():
     # a closed cube with mirrors (rho_s = 0.5): closure sum_j F_ij (1 - rho_s_j) = 1 holds for the
     # raw estimate up to truncation (max 30 bounces, 0.5^30 ~ 1e-9) and roulette noise

@@ -71,19 +71,41 @@ class TraceStats:
         return self.truncated_weight / max(self.rays, 1)
 
 
+def _alias_tables(weights: Array) -> tuple[Array, NDArray[np.int64]]:
+    """Walker/Vose alias table of a discrete distribution: (acceptance probability, alias index)."""
+    m = len(weights)
+    scaled = np.asarray(weights, float) * m / np.sum(weights)
+    prob, alias = np.ones(m), np.arange(m)
+    small = [i for i in range(m) if scaled[i] < 1.0]
+    large = [i for i in range(m) if scaled[i] >= 1.0]
+    while small and large:
+        lo, hi = small.pop(), large.pop()
+        prob[lo], alias[lo] = scaled[lo], hi
+        scaled[hi] -= 1.0 - scaled[lo]
+        (small if scaled[hi] < 1.0 else large).append(hi)
+    return prob, alias
+
+
 class _Emitter:
-    """Area-uniform points and cosine-weighted directions on the surfaces of an enclosure."""
+    """Area-uniform points and cosine-weighted directions on the surfaces of an enclosure.
+
+    A face of surface s is drawn in O(1) with an alias table over the faces of s
+    (probability = face area / surface area), a point uniformly in the triangle, and a
+    direction cos(theta)-distributed about the emitting normal (Malley's method).
+    """
 
     def __init__(self, enc: Enclosure) -> None:
         order = np.argsort(enc.face_surface, kind="stable")
-        self.face_of = order
         surf = enc.face_surface[order]
-        cum = np.cumsum(enc.face_areas[order])
-        start = np.searchsorted(surf, np.arange(enc.n_surfaces))
-        before = np.concatenate([[0.0], cum])[start]
-        # global cdf: the faces of surface s share the interval (s, s + 1] by area
-        self.cdf = surf + (cum - before[surf]) / enc.area[surf]
-        self.cdf[np.r_[start[1:] - 1, len(cum) - 1]] = np.arange(enc.n_surfaces) + 1.0
+        self.start = np.searchsorted(surf, np.arange(enc.n_surfaces))
+        self.n_faces = np.diff(np.r_[self.start, len(order)])
+        self.accept = np.ones(len(order), np.float32)
+        self.alias = np.arange(len(order))
+        for s0, m in zip(self.start, self.n_faces, strict=True):
+            prob, alias = _alias_tables(enc.face_areas[order[s0 : s0 + m]])
+            self.accept[s0 : s0 + m] = prob
+            self.alias[s0 : s0 + m] = s0 + alias
+        self.face_of = order
         V, F = enc.vertices, enc.faces
         p0 = V[F[:, 0]]
         e1, e2 = V[F[:, 1]] - p0, V[F[:, 2]] - p0
@@ -96,18 +118,18 @@ class _Emitter:
     def sample(self, src: NDArray[np.int64], rng: np.random.Generator) -> tuple[NDArray[np.float32], ...]:
         """Origins and unit directions (float32, (m, 3)) of rays leaving the surfaces ``src``."""
         m = len(src)
-        u = rng.random((5, m), dtype=np.float32)
-        k = np.searchsorted(self.cdf, src + np.clip(u[0], 1e-6, 1 - 1e-6))
-        B = self.basis[self.face_of[np.minimum(k, len(self.face_of) - 1)]]
+        u = rng.random((6, m), dtype=np.float32)
+        nf = self.n_faces[src]
+        slot = self.start[src] + np.minimum((u[0] * nf).astype(np.int64), nf - 1)
+        face = np.where(u[5] < self.accept[slot], slot, self.alias[slot])
+        B = self.basis[self.face_of[face]]
         r1, r2 = u[1], u[2]
         flip = r1 + r2 > 1
         r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
         rad, phi = np.sqrt(u[3]), np.float32(2 * np.pi) * u[4]
-        coef = np.empty((m, 6), np.float32)
-        coef[:, 0], coef[:, 1], coef[:, 2] = 1.0, r1, r2
-        coef[:, 3], coef[:, 4], coef[:, 5] = rad * np.cos(phi), rad * np.sin(phi), np.sqrt(1 - u[3])
-        pts = np.einsum("mk,mkj->mj", coef[:, :3], B[:, :3])
-        d = np.einsum("mk,mkj->mj", coef[:, 3:], B[:, 3:])
+        pts = B[:, 0] + r1[:, None] * B[:, 1] + r2[:, None] * B[:, 2]
+        d = (rad * np.cos(phi))[:, None] * B[:, 3] + (rad * np.sin(phi))[:, None] * B[:, 4]
+        d += np.sqrt(1 - u[3])[:, None] * B[:, 5]
         return pts, d
 
 
