@@ -30,6 +30,7 @@ class Settings(BaseSettings):
     max_speed: float = Field(1000.0, gt=0, description="largest real-time factor accepted")
     stream_max_hz: float = Field(20.0, gt=0, le=100.0, description="frames per second per client, at most")
     client_queue_frames: int = Field(4, ge=1, le=1000, description="per-client queue; older frames drop")
+    client_send_timeout_s: float = Field(10.0, gt=0, description="drop a client that takes no frame this long")
     flush_interval_s: float = Field(2.0, gt=0, description="timeseries / database / recording flush (wall s)")
     recording_image_interval_s: float = Field(0.5, gt=0, description="simulated s between field images in the .rrd")
     change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")

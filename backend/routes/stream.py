@@ -40,6 +40,7 @@ async def stream(ws: WebSocket, run_id: str) -> None:
         await ws.close(code=1000, reason="the run has ended")
         return
     sub = hub.subscribe()
+    send_timeout = ws.app.state.settings.client_send_timeout_s
 
     async def watch_disconnect() -> None:
         with contextlib.suppress(WebSocketDisconnect, RuntimeError):
@@ -60,7 +61,11 @@ async def stream(ws: WebSocket, run_id: str) -> None:
             if frame is None:
                 await ws.close(code=1000, reason="the run has ended")
                 return
-            await ws.send_text(frame)
+            try:
+                await asyncio.wait_for(ws.send_text(frame), timeout=send_timeout)
+            except TimeoutError:
+                log.warning("run %s: a stream client took no frame for %.0f s; dropping it", run_id, send_timeout)
+                return
             sub.delivered += 1
     except (WebSocketDisconnect, RuntimeError, ConnectionError):
         return
