@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from twin.boundary import (
     clamped_fraction,
     edge_losses,
+    face_loss_coefficients,
     holder_temperature,
     inert_gas_temperature,
 )
@@ -145,9 +146,9 @@ class Plant:
         self._h_holder = 2.0 * scale * cfg.holders.alpha * frac
         self._T_gas = inert_gas_temperature(cfg, xs)
         self._T_holder = holder_temperature(cfg, xs).astype(float)
-        # linear face loss A (d T - b) in W per cell
-        self._Ad = self.area * (self._h_gas + self._h_holder)
-        self._Ab = self.area * (self._h_gas * self._T_gas + self._h_holder * self._T_holder)
+        # linear face loss A (d T - b) in W per cell, from the module shared with the FE model
+        d, b = face_loss_coefficients(cfg, scale)
+        self._Ad, self._Ab = self.area * d, self.area * b
 
         # --- eq. (4): radiation tables ---
         self.radiation = None
