@@ -1,7 +1,7 @@
 """Figures of an open-loop plant run (``furnace-twin simulate``): PNG, matplotlib Agg.
 
 - :func:`plot_field`: the plant's temperature field at one time, with the fillet outline
-  and the thermocouple positions;
+  and the thermocouple positions, and below it the fillet's deviation from its mean;
 - :func:`plot_tc_traces`: the four TC readings, the fillet mean and the group powers
   (and eta when the specimen oscillates).
 """
@@ -45,41 +45,52 @@ def plot_field(
     tc_positions : absolute (x, y) m of TC1..TC4
     """
     F = np.asarray(field, float)
-    xe = np.linspace(0.0, length, len(np.asarray(x)) + 1) * 1e3
-    ye = np.linspace(0.0, width, len(np.asarray(y)) + 1) * 1e3
-    fig, ax = plt.subplots(figsize=(9.0, 5.2), constrained_layout=True)
-    mesh = ax.pcolormesh(xe, ye, F, cmap="inferno", shading="flat")
-    cb = fig.colorbar(mesh, ax=ax, shrink=0.9)
-    cb.set_label("T (K)")
+    xc, yc = np.asarray(x, float), np.asarray(y, float)
+    xe = np.linspace(0.0, length, len(xc) + 1) * 1e3
+    ye = np.linspace(0.0, width, len(yc) + 1) * 1e3
     x0, x1, y0, y1 = fillet
-    ax.add_patch(
-        Rectangle(
-            (x0 * 1e3, y0 * 1e3),
-            (x1 - x0) * 1e3,
-            (y1 - y0) * 1e3,
-            fill=False,
-            edgecolor="white",
-            linestyle="--",
-            linewidth=1.5,
-            label="fillet",
+    fig, axes = plt.subplots(2, 1, figsize=(9.0, 9.0), constrained_layout=True)
+    # top: the whole plate in K; bottom: the fillet relative to its mean (inhomogeneity)
+    mesh = axes[0].pcolormesh(xe, ye, F, cmap="inferno", shading="flat")
+    fig.colorbar(mesh, ax=axes[0], shrink=0.9).set_label("T (K)")
+    inside = (xc[None, :] > x0) & (xc[None, :] < x1) & (yc[:, None] > y0) & (yc[:, None] < y1)
+    mean = float(F[inside].mean()) if inside.any() else float(F.mean())
+    dev = np.where(inside, F - mean, np.nan)
+    lim = max(float(np.nanmax(np.abs(dev))) if inside.any() else 1.0, 0.5)
+    mesh = axes[1].pcolormesh(xe, ye, dev, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="flat")
+    fig.colorbar(mesh, ax=axes[1], shrink=0.9).set_label(f"T - fillet mean {mean:.0f} K (K)")
+    for ax in axes:
+        ax.add_patch(
+            Rectangle(
+                (x0 * 1e3, y0 * 1e3),
+                (x1 - x0) * 1e3,
+                (y1 - y0) * 1e3,
+                fill=False,
+                edgecolor="0.5" if ax is axes[1] else "white",
+                linestyle="--",
+                linewidth=1.5,
+                label="fillet",
+            )
         )
-    )
-    for i, (px, py) in enumerate(tc_positions):
-        ax.plot(px * 1e3, py * 1e3, "o", ms=9, mfc=TC_COLOURS[i % 4], mec="white", mew=1.5)
-        ax.annotate(
-            f"TC{i + 1}",
-            (px * 1e3, py * 1e3),
-            xytext=(6, 6),
-            textcoords="offset points",
-            color="white",
-            fontsize=10,
-            fontweight="bold",
-        )
-    ax.set_xlabel("x (mm), along the length, 0 = upper holder")
-    ax.set_ylabel("y (mm)")
-    ax.set_aspect("equal")
-    ax.set_title(title or f"plant field: min {F.min():.0f} K, max {F.max():.0f} K")
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.6)
+        for i, (px, py) in enumerate(tc_positions):
+            ax.plot(px * 1e3, py * 1e3, "o", ms=9, mfc=TC_COLOURS[i % 4], mec="white", mew=1.5)
+            ax.annotate(
+                f"TC{i + 1}",
+                (px * 1e3, py * 1e3),
+                xytext=(6, 6),
+                textcoords="offset points",
+                color="white" if ax is axes[0] else "black",
+                fontsize=10,
+                fontweight="bold",
+            )
+        ax.set_xlim(0, length * 1e3)
+        ax.set_ylim(0, width * 1e3)
+        ax.set_xlabel("x (mm), along the length, 0 = upper holder")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal")
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.6)
+    axes[0].set_title(title or f"plant field: min {F.min():.0f} K, max {F.max():.0f} K")
+    axes[1].set_title("fillet: deviation from its mean")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
