@@ -152,6 +152,25 @@ class DiscreteModel:
                 return th
         raise RuntimeError("steady_state: Newton did not converge")
 
+    def hold_powers(self, T_mean: float, distribution: ArrayLike | None = None) -> Array:
+        """Group fractions u = s * distribution whose steady state has the fillet mean c_m^T theta = T_mean.
+
+        Newton on the scalar s with d(mean)/ds = -c_m^T (df/dtheta)^{-1} B distribution.  Raises
+        ``ValueError`` if that needs more than u_max in some group.
+        """
+        d = np.ones(self.m) if distribution is None else np.asarray(distribution, float)
+        s, th = 0.5 / float(d.max()), None
+        for _ in range(50):
+            th = self.steady_state(s * d, th)
+            err = float(self.c_m @ th) - T_mean
+            if abs(err) < 1e-8:
+                return s * d
+            Jc = (self.jac_theta(th) - np.eye(self.n)) / self.t_s
+            s -= err / float(self.c_m @ np.linalg.solve(Jc, -self.B @ d))
+            if s * float(d.max()) > 1.0:
+                raise ValueError(f"T_mean = {T_mean} K needs more than u_max with this distribution")
+        raise RuntimeError("hold_powers: Newton did not converge")
+
 
 def discrete_model(
     cfg: FurnaceConfig,
