@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -109,6 +110,13 @@ def uniform_scale(
     return _result(plant, s * d, T, T_mean)
 
 
+def _single_threaded_blas() -> Any:
+    """BLAS limited to one thread: the dense 442 x 442 solves only contend on shared cores."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def steady_powers(
     plant: Plant,
     T_mean: float = 1100.0,
@@ -129,6 +137,13 @@ def steady_powers(
     -------
     SteadyPowers; ``fillet_mean`` shows whether T_mean was reachable within the bounds.
     """
+    with _single_threaded_blas():
+        return _steady_powers(plant, T_mean, oscillation, u0)
+
+
+def _steady_powers(
+    plant: Plant, T_mean: float, oscillation: OscillationSpec | None, u0: ArrayLike | None
+) -> SteadyPowers:
     start = uniform_scale(plant, T_mean, oscillation) if u0 is None else None
     x0 = np.clip(start.u if start is not None else np.asarray(u0, float), 0.0, 1.0)
     w = steady_weights(plant, oscillation)
