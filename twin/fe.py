@@ -22,7 +22,7 @@ Example
 >>> from twin.config import load_config
 >>> fe = FEModel(load_config())
 >>> fe.n, fe.M_theta.shape
-(117, (442, 117))
+(105, (442, 105))
 """
 
 from __future__ import annotations

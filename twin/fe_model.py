@@ -22,7 +22,7 @@ Example
 >>> from twin.radiation import radiation_model
 >>> model = discrete_model(small_config(), radiation_model(small_config()), None)  # doctest: +SKIP
 >>> model.step(300.0 * np.ones(model.n), np.full(6, 0.5)).shape  # doctest: +SKIP
-(117,)
+(105,)
 """
 
 from __future__ import annotations
