@@ -137,3 +137,29 @@ def test_process_noise_formula() -> None:
     S = np.array([[4.0, 4.0, 1.0], [4.0, 4.0, 4.0], [1.0, 4.0, 4.0]])  # q1 sign(M) + 1 1^T by hand
     np.testing.assert_allclose(process_noise(M, q0, q1), q0 * S @ S, rtol=1e-15)
     assert np.linalg.eigvalsh(process_noise(M, q0, q1)).min() >= -1e-12  # square of a symmetric matrix
+
+
+def test_all_readings_beyond_the_gate_means_the_estimate_is_wrong(system, caplog) -> None:
+    """Three sensors failing at once is less likely than a wrong estimate: inflate P and use them."""
+    sy = system
+    P = 0.01 * np.eye(len(sy.x0))  # over-confident
+    st = EKFState(sy.x0 + 200.0, P)  # and 200 K off
+    y = sy.C @ sy.x0
+    with caplog.at_level(logging.WARNING, logger="twin.ekf"):
+        got, info = ekf_update(st, y, sy.C, sy.R, gate=6.0)
+    assert "beyond the gate" in caplog.text
+    assert info.used.all()
+    # oracle: the textbook update with P scaled so that the closest reading sits at the gate
+    nu = y - sy.C @ st.theta
+    s = (np.min(np.abs(nu) / np.sqrt(np.diag(sy.C @ P @ sy.C.T + sy.R))) / 6.0) ** 2
+    ref = _reference_kf(sy.A, sy.B, sy.C, sy.Q, sy.R, st.theta, s * P, [y], sy.us)
+    np.testing.assert_allclose(got.theta, ref[0][0], atol=1e-9)
+    np.testing.assert_allclose(got.P, ref[0][1], atol=1e-9)
+    # the estimate moved most of the way back (measured: from 200 K to at most 15 K off at the TCs)
+    assert np.max(np.abs(sy.C @ got.theta - y)) < 200.0 / 4
+    # a single gated reading among good ones is still just left out
+    y1 = y.copy()
+    y1[0] += 1e4
+    good = EKFState(sy.x0.copy(), 25.0 * np.eye(len(sy.x0)))
+    _, info1 = ekf_update(good, y1, sy.C, sy.R, gate=6.0)
+    assert info1.used.tolist() == [False, True, True]

@@ -12,7 +12,10 @@ Update (13) with the TC readings y_j = C theta_j + v_j (12b)::
 The Joseph form equals (I - L C) P of eq. (15) for the optimal gain and keeps P symmetric
 positive definite in floating point.  Faulty TCs (NaN / inf reading or a normalised innovation
 |nu_i| / sqrt(S_ii) above ``cfg.ekf.innovation_gate``) are left out of that update with a
-logged warning.  Q = q0 (q1 sign(M) + 1 1^T)^2 and R = r0 I (section 3.2).
+logged warning.  If every working TC (at least two) fails the gate at once, the estimate is
+taken to be wrong rather than all sensors: P is inflated until the closest reading sits at the gate
+and all readings are used, so the filter recovers instead of gating itself off for ever.
+Q = q0 (q1 sign(M) + 1 1^T)^2 and R = r0 I (section 3.2).
 
 Example
 -------
@@ -117,6 +120,15 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     normalized = np.abs(innov) / np.sqrt(np.diag(S_full))
     finite = np.isfinite(yv)
     used = finite & (normalized <= gate)
+    if finite.sum() >= 2 and not used.any():
+        # every working TC disagrees with the estimate: the estimate is wrong, not all sensors at
+        # once.  Inflate P until the closest reading sits at the gate and use them all (recovery).
+        scale = float(np.min(normalized[finite]) / gate) ** 2
+        log.warning("EKF: all TC readings beyond the gate; covariance inflated x%.3g and readings used", scale)
+        state = EKFState(state.theta, scale * state.P)
+        PCt_full = scale * PCt_full
+        S_full = C @ PCt_full + R
+        used = finite
     reasons = tuple("" if ok else ("missing" if not fin else "gated") for ok, fin in zip(used, finite, strict=True))
     for i, why in enumerate(reasons):
         if why:
