@@ -175,6 +175,16 @@ def test_anti_windup_freezes_integrator_at_upper_saturation(standin, cfg):
     assert ctrl.state.e_I == 0.0 and ctrl.state.frozen
 
 
+def test_integrator_keeps_running_while_another_group_can_follow(standin, cfg):
+    # group 2 runs at u = 1 in the plan; the plant is too cold, so the integrator pushes all groups up:
+    # groups 0 and 1 can still follow, so e_I must integrate (eq. 22 with delta = 1)
+    plan = _constant_plan(standin, np.array([0.4, 0.4, 1.0]), 20)
+    ctrl = Controller(standin, plan, lqg_gains(standin, plan, cfg), cfg)
+    u, u_ff, du = ctrl.control(0, plan.theta_ref[0] - 2.0)
+    assert u[2] == 1.0 and du[2] > 0 and np.all(u[:2] < 1.0)
+    assert ctrl.state.e_I == pytest.approx(standin.t_s * -2.0, rel=1e-12) and not ctrl.state.frozen
+
+
 def test_anti_windup_freezes_integrator_on_total_power(standin, cfg):
     # Remark 5: delta = 0 when 1^T u > delta0; u = 0.9 in each of 3 groups -> 2.7
     ctrl, plan, _ = _controller(standin, cfg.with_overrides({"lqg.delta0": 2.5}), 0.9)
