@@ -129,6 +129,6 @@ def test_ekf_step_benchmark_runs(small_radiation) -> None:
     from twin.ekf import ekf_step_ms
 
     ms = ekf_step_ms(CFG, small_radiation, repeats=20)
-    # budget 2 ms (brief); 50 ms only catches a broken path (e.g. multi-threaded BLAS thrashing at
-    # 30 ms per predict, measured) without flaking on a loaded 2-core CI box
+    # budget 2 ms (brief; measured 1.4-1.8 ms at load 4, 2-4 ms at load 9 on the shared 2 cores).
+    # 50 ms = 25x the budget: catches a grossly broken path without flaking on a loaded CI box
     assert 0.0 < ms < 50.0
