@@ -74,22 +74,19 @@ class Snapshot:
     events: tuple[str, ...] = ()
 
 
-@dataclass
-class _Controllers:
-    """Everything that depends on the model variant (fixed / averaged) and on the plan."""
+@dataclass(frozen=True)
+class _Plan:
+    """What depends on the model variant (fixed / averaged) and the reference: immutable, shareable."""
 
     model: Any
     plan: Any
     gains: Any
-    controller: Any
-    j0: int  # sample index at which the plan starts
 
 
 @dataclass
 class _Pending:
-    future: Future[_Controllers]
+    future: Future[_Plan]
     description: str
-    started_j: int
 
 
 @dataclass
@@ -123,6 +120,8 @@ class ClosedLoop:
     scenario : the run (reference, duration, oscillation, TC4, mismatch, noise, seed).
     radiation : a shared :class:`twin.radiation.RadiationModel` (loaded from the cache if None).
     background : re-plan in a worker thread (backend) instead of inline (CLI, tests).
+    plan_cache : shared between loops (the campaign): the initial plan of an identical start
+        (same oscillation, reference and initial estimate) is solved once.
     """
 
     def __init__(
@@ -132,8 +131,10 @@ class ClosedLoop:
         radiation: Any = None,
         *,
         background: bool = False,
+        plan_cache: dict[Any, _Plan] | None = None,
     ) -> None:
         from twin.ekf import Estimator
+        from twin.lqg import Controller
         from twin.plant import Plant
         from twin.radiation import radiation_model
         from twin.sensors import Thermocouples
@@ -142,7 +143,7 @@ class ClosedLoop:
         self.scenario = scenario
         self.t_s = cfg.sampling.t_s
         self.n_steps = int(round(scenario.duration / self.t_s))
-        self.radiation = radiation if radiation is not None else radiation_model(cfg)
+        self.radiation: Any = radiation if radiation is not None else radiation_model(cfg)
         self._rng = np.random.default_rng(scenario.seed)
         self._lock = threading.Lock()
         self._executor = ThreadPoolExecutor(max_workers=1) if background else None
@@ -151,8 +152,9 @@ class ClosedLoop:
 
         # --- the simulated furnace and its sensors (the "truth") ---
         self.plant = Plant(cfg, self.radiation, scenario.mismatch)
-        self.tc_positions = np.asarray(cfg.tc_positions(scenario.tc4))
-        self.thermocouples = Thermocouples(cfg, self.tc_positions)
+        positions = cfg.tc_positions(scenario.tc4)
+        self.tc_positions = np.asarray(positions)
+        self.thermocouples = Thermocouples(cfg, positions)
         self._T = np.full(cfg.specimen.n_states, cfg.specimen.initial_temperature)
         self._oscillation = scenario.oscillation
         self._eta_of_t = oscillation_of(scenario.oscillation)
@@ -164,7 +166,14 @@ class ClosedLoop:
         self._reference_spec: Reference = scenario.reference
         self._T_initial = float(np.mean(y0[:3]))
         self._ref_fn = self._make_reference(scenario.reference, self._T_initial, t_shift=0.0)
-        self._ctl = self._plan(scenario.oscillation, theta0, j0=0, ref_fn=self._ref_fn, previous=None)
+        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes())
+        if plan_cache is not None and key in plan_cache:
+            self._ctl = plan_cache[key]
+        else:
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None)
+            if plan_cache is not None:
+                plan_cache[key] = self._ctl
+        self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimator = Estimator(self._ctl.model, cfg, theta0)
         self._y_next = y0
 
@@ -198,21 +207,19 @@ class ClosedLoop:
         return lambda t: fn(np.asarray(t, float) - t_shift)
 
     def _plan(
-        self, spec: OscillationSpec, theta: Array, j0: int, ref_fn: Callable[[Any], Any], previous: Any
-    ) -> _Controllers:
-        """Build model, feedforward, gains and controller for the rest of the run (eqs. 18-29)."""
+        self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any
+    ) -> _Plan:
+        """Model, feedforward and gains for the rest of the run from t0 (eqs. 11, 18-29)."""
         from twin.fe_model import discrete_model
-        from twin.lqg import Controller
         from twin.replan import replan
 
         model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
-        t0 = j0 * self.t_s
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Controllers(model, plan, gains, Controller(model, plan, gains, self.cfg), j0)
+        return _Plan(model, plan, gains)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> None:
@@ -234,17 +241,19 @@ class ClosedLoop:
 
     def _start_replan(self, spec: OscillationSpec, description: str) -> None:
         theta = self.estimator.state.theta.copy()
-        j0 = self.j
+        t0 = self.j * self.t_s
         ref_fn, previous = self._ref_fn, self._ctl.plan
         self._events.append(description)
         if self._executor is None:
-            self._install(self._plan(spec, theta, j0, ref_fn, previous), description)
+            self._install(self._plan(spec, theta, t0, ref_fn, previous), description)
         else:
-            fut = self._executor.submit(self._plan, spec, theta, j0, ref_fn, previous)
-            self._pending = _Pending(fut, description, j0)
+            fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous)
+            self._pending = _Pending(fut, description)
 
-    def _install(self, ctl: _Controllers, description: str) -> None:
+    def _install(self, ctl: _Plan, description: str) -> None:
+        """Swap in a new plan at a sample boundary; the integrator state carries over."""
         self._ctl = ctl
+        self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         self.estimator.set_model(ctl.model)
         self._events.append(f"re-planned ({description}): {ctl.plan.status}")
 
@@ -281,7 +290,7 @@ class ClosedLoop:
             state = self.estimator.update(y[:3])  # eq. 13 (faulty readings gated inside)
             theta = state.theta
             ctl = self._ctl
-            u, u_ff, _du = ctl.controller.control(j - ctl.j0, theta)  # eqs. 17, 25
+            u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
             T_ref = float(self._ref_fn(t))
 

@@ -45,11 +45,11 @@ class Steel:
 
     def heat_capacity(self, T: ArrayLike) -> Array:
         """c_p(T) in J/(kg K)."""
-        return np.interp(T, self.temperatures, self.cp_table)
+        return np.interp(np.asarray(T, float), self.temperatures, self.cp_table)
 
     def conductivity(self, T: ArrayLike) -> Array:
         """lambda(T) in W/(m K)."""
-        return np.interp(T, self.temperatures, self.conductivity_table)
+        return np.interp(np.asarray(T, float), self.temperatures, self.conductivity_table)
 
     def _slope(self, T: ArrayLike, table: Array) -> Array:
         t = np.asarray(T, float)
