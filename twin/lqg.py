@@ -231,18 +231,19 @@ def lqg_gains(model: LinearizableModel, plan: FeedforwardPlan, cfg: FurnaceConfi
     P_S = P
 
     K = np.empty((N, m, n + 1))
-    cache: dict[int, tuple[Array, Array]] = {}
+    key: tuple[int, float] | None = None
+    Pt = Gt = np.empty(0)
     for j in range(N - 1, -1, -1):
         jj = (j // every) * every
-        if jj not in cache:
-            cache.clear()
-            cache[jj] = (
-                np.asarray(model.jac_theta(plan.theta_ref[jj], plan.u_ff[jj]), float),
-                np.asarray(model.jac_u(plan.theta_ref[jj], plan.u_ff[jj]), float),
-            )
-        Phi, Gam = cache[jj]
         delta = anti_windup_delta(plan.u_ff[j], w.delta0)
-        Pt, Gt = augmented_system(Phi, Gam, c_m, t_s, delta)
+        if key is None or key[0] != jj:
+            Phi = np.asarray(model.jac_theta(plan.theta_ref[jj], plan.u_ff[jj]), float)
+            Gam = np.asarray(model.jac_u(plan.theta_ref[jj], plan.u_ff[jj]), float)
+            Pt, Gt = augmented_system(Phi, Gam, c_m, t_s, delta)
+        elif key[1] != delta:
+            Pt = Pt.copy()
+            Pt[n, :n] = delta * t_s * c_m
+        key = (jj, delta)
         P, K[j] = riccati_step(P, Pt, Gt, Q, w.r0)
     elapsed = time.perf_counter() - t_start
     log.info("LQG gains for %d samples (Jacobians every %d) in %.2f s", N, every, elapsed)
