@@ -50,17 +50,24 @@ def test_every_lamp_is_addressable(plant, cfg):
     np.testing.assert_allclose(
         plant.rhs(T, None, 0.01, u_lamps=cfg.group_matrix @ U), plant.rhs(T, U, 0.01), rtol=1e-12
     )
-    # a lamp outside all groups (h12, the middle of the horizontal array) heats the plate
-    lamp = cfg.lamps.lamp_index("h12")
-    assert cfg.group_matrix[lamp].sum() == 0
+    # a horizontal lamp outside all groups heats the plate; take the one farthest from the
+    # middle so that a reversed or shifted lamp order would show
+    nh = cfg.lamps.horizontal.count
+    free = [i for i in range(nh) if cfg.group_matrix[i].sum() == 0]
+    assert free, "the test needs a horizontal lamp outside the groups"
+    lamp = max(free, key=lambda i: abs(i - (nh - 1) / 2))
     one = np.zeros(cfg.lamps.n_lamps)
     one[lamp] = 1.0
     gain = plant.rhs(T, None, 0.0, u_lamps=one) - plant.rhs(T, None, 0.0, u_lamps=np.zeros(cfg.lamps.n_lamps))
     assert gain.min() > 0.0
-    # its strongest effect lies under the lamp: h12 sits at x = L/2 + (12 - 12.5) L_h
-    x_lamp = cfg.specimen.length / 2 + (12 - (cfg.lamps.horizontal.count + 1) / 2) * cfg.lamps.horizontal.pitch
+    # its strongest effect lies near the lamp: h_(i+1) sits at x = L/2 + (i - (N_h - 1) / 2) L_h.
+    # The direct irradiance of a tube 60 mm away is broad (half width ~60 mm) and the multiply
+    # reflected part favours the middle of the plate: measured, the maximum lies 15-19 mm
+    # (about one cell) towards the middle for every lamp; two cells bound it, while the
+    # mirror lamp of this one is >= 4 cells away
+    x_lamp = cfg.specimen.length / 2 + (lamp - (nh - 1) / 2) * cfg.lamps.horizontal.pitch
     i_peak = int(np.argmax(plant.field(gain).mean(axis=0)))
-    assert abs(plant.x_centers[i_peak] - x_lamp) <= plant.dx
+    assert abs(plant.x_centers[i_peak] - x_lamp) <= 2 * plant.dx
 
 
 def test_energy_balance_over_an_oscillating_run(plant):
@@ -105,7 +112,7 @@ def test_gershgorin_bound_with_radiation(plant):
     assert np.max(np.abs(np.linalg.eigvals(J))) <= plant.spectral_radius_bound(T, plant.rhs(T, U, 0.0))
 
 
-@pytest.mark.parametrize(("method", "tolerance"), [("heun", 1e-2), ("rk4", 2e-3)])
+@pytest.mark.parametrize(("method", "tolerance"), [("ab2", 5e-2), ("heun", 1e-2), ("rk4", 2e-3)])
 def test_explicit_stepping_against_bdf_with_oscillation(cfg, small_radiation, method, tolerance):
     plant = Plant(cfg, small_radiation, method=method)
     eta = eta_function(OSC)
@@ -122,7 +129,7 @@ def test_explicit_stepping_against_bdf_with_oscillation(cfg, small_radiation, me
         t_eval=[6.0],
     )
     assert ref.success
-    # measured: Heun 2.8e-3 K, RK4 1.0e-4 K (BDF at rtol 1e-10 ~ 1e-6 K); the bounds are those of
+    # measured: AB2 1.8e-2 K, Heun 2.8e-3 K, RK4 1.0e-4 K (BDF at rtol 1e-10 ~ 1e-6 K); the bounds are those of
     # the conduction-only comparison (test_plant_conduction.BDF_TOLERANCE): P(eta) is piecewise
     # linear in eta, so like the c_p kinks a table node costs RK4 its order for one step
     np.testing.assert_allclose(states[-1], ref.y[:, 0], atol=tolerance)
