@@ -91,6 +91,26 @@ def test_terminal_dare_matches_scipy_and_dlqr(standin, cfg):
     assert np.max(np.abs(gains.P_terminal - S_dlqr)) <= 1e-8 * np.max(np.abs(S_dlqr))
 
 
+def test_terminal_dare_on_the_furnace_model_matches_scipy_and_dlqr(cfg, small_radiation):
+    """The real augmented system (eq. 24) at a steady state: eigenvalues close to 1."""
+    control = pytest.importorskip("control")
+    from twin.fe_model import discrete_model
+
+    model = discrete_model(cfg, small_radiation, None)
+    u = np.full(model.m, 0.5)
+    theta = steady_state(model, u, np.full(model.n, 1000.0))
+    Pt, Gt, Q = _augmented_at_steady(model, cfg, u)
+    plan = FeedforwardPlan(np.arange(3) * model.t_s, np.tile(u, (2, 1)), np.tile(theta, (3, 1)),
+                           np.full(3, model.c_m @ theta), np.full(3, model.c_m @ theta), "steady", 0, 0.0, True)
+    gains = lqg_gains(model, plan, cfg)
+    r0 = cfg.lqg.r0 * np.eye(model.m)
+    P_sp = scipy.linalg.solve_discrete_are(Pt, Gt, Q, r0)
+    K_dlqr, _, _ = control.dlqr(Pt, Gt, Q, r0)
+    # brief: equal to the scipy / python-control solution to 1e-8 (relative)
+    assert np.max(np.abs(gains.P_terminal - P_sp)) <= 1e-8 * np.max(np.abs(P_sp))
+    assert np.max(np.abs(gains.K_terminal + K_dlqr)) <= 1e-8 * np.max(np.abs(K_dlqr))
+
+
 def test_dare_residual_is_zero(standin, cfg):
     Pt, Gt, Q = _augmented_at_steady(standin, cfg, np.full(standin.m, 0.4))
     r0 = cfg.lqg.r0
