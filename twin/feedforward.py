@@ -352,8 +352,7 @@ def _knot_weights(grid: _Grid) -> Array:
     return w / grid.N
 
 
-def _ipopt_options(max_iter: int, warm: bool, max_wall_s: float,
-                   extra: dict[str, Any] | None) -> dict[str, Any]:
+def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | None) -> dict[str, Any]:
     """IPOPT options (stack-notes.md).
 
     The adaptive barrier update suits the many bounds of (d, v).  Besides the strict
@@ -478,7 +477,7 @@ def _solve_feedforward(model: DiscreteModelLike, theta0: ArrayLike, t0: float, T
         x_init = _free_guess(model, grid, n_heun, T_knots, th0, warm_start, fw.smoothing)
     reg = np.full(inputs.n_params, INPUT_REGULARIZATION / grid.K)
     if parametrized:
-        reg[:m] = 0.0  # the distribution d is fixed by 1^T d = 1; only v needs it
+        reg[:m] = 0.0  # the distribution d is fixed by eta^T d = 1; only v needs it
     shooting = CoarseShooting(model, th0, grid.dt, n_heun, T_knots, _knot_weights(grid), fw.g0, fw.g1, inputs,
                               reg)
     x = ca.MX.sym("p", inputs.n_params)
@@ -489,7 +488,7 @@ def _solve_feedforward(model: DiscreteModelLike, theta0: ArrayLike, t0: float, T
         g = ca.MX(0, 1)
         lbg, ubg = [], []
     f_cb, grad_cb, hess_cb = casadi_objective(shooting, int(g.numel()))
-    opts = _ipopt_options(max_iter, warm_start is not None, max_wall_s, ipopt_options)
+    opts = _ipopt_options(max_iter, max_wall_s, ipopt_options)
     opts.update({"grad_f": grad_cb, "hess_lag": hess_cb})
     solver = ca.nlpsol("feedforward", "ipopt", {"x": x, "f": f_cb(x), "g": g}, opts)
     sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
@@ -510,7 +509,7 @@ def _solve_feedforward(model: DiscreteModelLike, theta0: ArrayLike, t0: float, T
     v_fine: Array | None
     if parametrized:
         d_opt = np.clip(xopt[:m], 0.0, None)
-        v_opt = xopt[m:]
+        v_opt = np.clip(xopt[m:], 0.0, None)
         scale = float(np.max(d_opt))
         u_c = d_opt / scale  # max(u_c) = 1 (20d)
         v_knots = v_opt * scale
