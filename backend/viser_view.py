@@ -32,11 +32,13 @@ from twin.scenario import OscillationSpec, Scenario, TransitionReference
 
 log = logging.getLogger(__name__)
 
-UPDATE_HZ = 10.0
+UPDATE_HZ = 5.0  # scene updates per second (<= ~10 Hz); every plate update is a GLB for the browser
 GOLD = (212, 175, 55)
 LAMP_OFF = np.array([70, 70, 78], dtype=float)
 LAMP_ON = np.array([255, 236, 80], dtype=float)
 MIN_SPAN_K = 10.0  # colour range of the plate spans at least this many kelvin
+#: shadows cost a lot in software WebGL (headless browsers, remote desktops) and add nothing here
+NO_SHADOW: dict[str, Any] = {"cast_shadow": False, "receive_shadow": False}
 
 
 def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -45,6 +47,20 @@ def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
     x = np.clip((np.asarray(values, dtype=float) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
     return (colormaps["turbo"](x)[..., :3] * 255).astype(np.uint8)
+
+
+def colour_range(field: np.ndarray, step: float = 5.0) -> tuple[float, float]:
+    """Colour range (K) of the plate: its min..max widened to multiples of ``step`` and to at
+    least ``MIN_SPAN_K``, so the colours do not flicker with the noise of the estimate."""
+    f = np.asarray(field, dtype=float)
+    finite = f[np.isfinite(f)]
+    if not finite.size:
+        return (290.0, 310.0)
+    lo, hi = step * np.floor(finite.min() / step), step * np.ceil(finite.max() / step)
+    if hi - lo < MIN_SPAN_K:
+        mid = 0.5 * (lo + hi)
+        lo, hi = mid - MIN_SPAN_K / 2, mid + MIN_SPAN_K / 2
+    return (float(lo), float(hi))
 
 
 def vertex_values(field: np.ndarray) -> np.ndarray:
@@ -91,6 +107,7 @@ class FurnaceView:
         self._thread: threading.Thread | None = None
         self._last_seq = -1
         self._lamp_rgb: np.ndarray | None = None
+        self._plate_rgb: np.ndarray | None = None
 
     @property
     def url(self) -> str:
@@ -118,7 +135,8 @@ class FurnaceView:
         sc = self.server.scene
         s = self.cfg.specimen
         sc.set_up_direction("-x")  # x points down along the specimen (default_furnace.toml frame)
-        self.server.initial_camera.position = (s.length / 2, s.width / 2 + 0.55, 0.35)
+        # from the vertical-lamp side: those lamps are sparse, so the plate is seen between them
+        self.server.initial_camera.position = (s.length / 2 + 0.05, s.width / 2 + 0.32, -0.55)
         self.server.initial_camera.look_at = (s.length / 2, s.width / 2, 0.0)
         self.server.initial_camera.up = (-1.0, 0.0, 0.0)
         self.lamps: list[Any] = []
@@ -126,28 +144,32 @@ class FurnaceView:
         self.housing: list[Any] = []
         for name, kind, verts, faces in display_meshes(self.cfg, 0.0):
             if kind == "lamp":
-                self.lamps.append(sc.add_mesh_simple(f"/furnace/lamps/{name}", verts, faces, color=tuple(LAMP_OFF)))
+                self.lamps.append(sc.add_mesh_simple(f"/furnace/lamps/{name}", verts, faces, color=tuple(LAMP_OFF),
+                                                     **NO_SHADOW))
             elif kind == "reflector":
-                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=GOLD, opacity=0.35, side="double")
+                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=GOLD, opacity=0.18, side="double",
+                                   **NO_SHADOW)
             elif kind == "holder":
-                self.holders.append(sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(110, 120, 135)))
+                self.holders.append(sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(110, 120, 135),
+                                                       **NO_SHADOW))
             elif kind == "window":
                 sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(170, 210, 240), opacity=0.15,
-                                   side="double")
+                                   side="double", **NO_SHADOW)
             elif kind == "housing":
                 self.housing.append(sc.add_mesh_simple(f"/furnace/housing/{name}", verts, faces,
                                                        color=(150, 155, 165), opacity=0.12, side="double",
-                                                       visible=False))
+                                                       visible=False, **NO_SHADOW))
         field = np.full((s.ny, s.nx), s.initial_temperature)
-        self.plate = sc.add_mesh_trimesh("/furnace/specimen", plate_mesh(self.cfg, field, 290.0, 310.0))
+        self.plate = sc.add_mesh_trimesh("/furnace/specimen", plate_mesh(self.cfg, field, 290.0, 310.0), **NO_SHADOW)
         self.tc_markers = []
         self.tc_labels = []
         for k, (x, y) in enumerate(self.cfg.tc_positions()):
             color = (255, 80, 200) if k == 3 else (255, 255, 255)
             self.tc_markers.append(sc.add_icosphere(f"/furnace/tc/TC{k + 1}", radius=0.004, color=color,
-                                                    position=(x, y, s.thickness / 2 + 0.002)))
+                                                    position=(x, y, 0.0), **NO_SHADOW))  # pokes out of both faces
             self.tc_labels.append(sc.add_label(f"/furnace/tc/TC{k + 1}/label", f"TC{k + 1}",
-                                               position=(0.0, 0.0, 0.006)))
+                                               position=(0.0, 0.0, 0.0),
+                                               anchor="bottom-left" if k == 1 else "top-left"))
 
     def _build_gui(self) -> None:
         assert self.server is not None
@@ -266,16 +288,18 @@ class FurnaceView:
         """Put one snapshot on the scene (plate colours and position, lamps, TCs, text)."""
         assert self.server is not None
         field = np.asarray(snap.field_hat, dtype=float)
-        finite = field[np.isfinite(field)]
-        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (290.0, 310.0)
-        if hi - lo < MIN_SPAN_K:
-            mid = 0.5 * (lo + hi)
-            lo, hi = mid - MIN_SPAN_K / 2, mid + MIN_SPAN_K / 2
+        lo, hi = colour_range(field)
         eta = float(snap.eta)
-        s = self.cfg.specimen
+        mesh = plate_mesh(self.cfg, field, lo, hi)
+        colours = np.asarray(mesh.visual.vertex_colors)
         with self.server.atomic():
-            self.plate = self.server.scene.add_mesh_trimesh(
-                "/furnace/specimen", plate_mesh(self.cfg, field, lo, hi), position=(eta, 0.0, 0.0))
+            if self._plate_rgb is None or not np.array_equal(colours, self._plate_rgb):
+                # a new GLB only when a vertex colour changed (each one costs the browser a parse)
+                self.plate = self.server.scene.add_mesh_trimesh(
+                    "/furnace/specimen", mesh, position=(eta, 0.0, 0.0), **NO_SHADOW)
+                self._plate_rgb = colours
+            else:
+                self.plate.position = (eta, 0.0, 0.0)
             for h in self.holders:
                 h.position = (eta, 0.0, 0.0)
             rgb = lamp_colors(self.cfg, np.asarray(snap.u))
@@ -284,7 +308,7 @@ class FurnaceView:
                     handle.color = tuple(int(c) for c in rgb[k])
             self._lamp_rgb = rgb
             for k, (x, y) in enumerate(self.manager.cfg.tc_positions(self._tc4(run_id))):
-                self.tc_markers[k].position = (x + eta, y, s.thickness / 2 + 0.002)
+                self.tc_markers[k].position = (x + eta, y, 0.0)
                 reading = float(np.asarray(snap.tc)[k])
                 self.tc_labels[k].text = f"TC{k + 1} {reading:.1f} K" if np.isfinite(reading) else f"TC{k + 1} –"
         self.md_status.content = (

@@ -1,0 +1,154 @@
+"""The whole lifecycle through FastAPI's TestClient with the real closed loop (small_config):
+start, stream, reference change and oscillation toggle visible in the frames, finish, files,
+the .rrd read back by rerun's own CLI.  (Stopping a real run is in test_browser.py, the fake-loop
+stop in test_api_contract.py: each real run costs a feedforward solve.)"""
+
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.app import create_app
+from backend.settings import Settings
+
+SCENARIO = {"duration": 12.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
+REF_AT, NEW_REF = 3.0, {"setpoint": 950.0, "t_E": 2.0}
+OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
+
+
+def wait_status(c: TestClient, run_id: str, statuses: set[str], timeout: float = 120.0) -> dict:
+    end = time.monotonic() + timeout
+    body = {}
+    while time.monotonic() < end:
+        body = c.get(f"/api/runs/{run_id}").json()
+        if body["status"] in statuses:
+            return body
+        time.sleep(0.1)
+    raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory, small_cfg):
+    data = tmp_path_factory.mktemp("lifecycle")
+    with TestClient(create_app(Settings(data_dir=data), small_cfg)) as c:
+        r = c.post("/api/runs", json=SCENARIO)
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
+        frames, changes = [], {}
+        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+            while True:
+                try:
+                    f = json.loads(ws.receive_text())
+                except Exception:
+                    break
+                frames.append(f)
+                if "reference" not in changes and f["t"] >= REF_AT:
+                    resp = c.put(f"/api/runs/{run_id}/reference", json=NEW_REF)
+                    changes["reference"] = (resp, time.time())
+                if "oscillation" not in changes and f["t"] >= OSC_AT:
+                    resp = c.put(f"/api/runs/{run_id}/oscillation", json=NEW_OSC)
+                    changes["oscillation"] = (resp, time.time())
+        body = wait_status(c, run_id, {"finished", "error"})
+        metrics = c.get(f"/api/runs/{run_id}/metrics")
+        npz = c.get(f"/api/runs/{run_id}/timeseries")
+        rrd = c.get(f"/api/runs/{run_id}/recording")
+        yield {"id": run_id, "frames": frames, "changes": changes, "body": body, "metrics": metrics,
+               "npz": npz, "rrd": rrd, "folder": data / "runs" / run_id, "client": c}
+
+
+def test_frames_follow_the_contract(finished_run, small_cfg) -> None:
+    frames = finished_run["frames"]
+    assert finished_run["body"]["status"] == "finished", finished_run["body"]["error"]
+    s = small_cfg.specimen
+    for f in frames:
+        assert len(f["field"]) == s.ny and all(len(row) == s.nx for row in f["field"])
+        assert len(f["tc"]) == 4 and len(f["tc_hat"]) == 4 and len(f["u"]) == 6 and len(f["u_ff"]) == 6
+        assert all(0.0 <= u <= 1.0 + 1e-9 for u in f["u"])  # group powers are fractions of u_max
+    ts = [f["t"] for f in frames]
+    assert ts == sorted(ts) and ts[-1] == pytest.approx(SCENARIO["duration"])
+    # speed 3 x 10 samples per simulated s = 30 samples/s, capped at 20 frames/s per client:
+    # 12 s / 3 = 4 s of wall time -> at most ~80 frames, and far more than a handful
+    assert 20 <= len(frames) <= 12 * 10 + 2
+
+
+def _first_frame_after(frames: list[dict], t: float) -> dict:
+    return next(f for f in frames if f["t"] > t + 1e-9)
+
+
+def test_reference_change_visible_in_frames(finished_run) -> None:
+    resp, answered = finished_run["changes"]["reference"]
+    assert resp.status_code == 200, resp.text
+    change = resp.json()
+    assert change["status"] == "applied"
+    t0 = change["applied_t"]
+    frames = finished_run["frames"]
+    assert max(f["T_ref"] for f in frames if f["t"] <= t0) <= 900.0 + 1e-6  # old setpoint, still ramping
+    # the new reference holds 950 K once its 2 s transition is over (C1 transition, then constant)
+    settled = [f["T_ref"] for f in frames if f["t"] >= t0 + NEW_REF["t_E"] + 0.2]
+    assert settled and all(abs(T - 950.0) < 0.5 for T in settled)
+    # the stream shows the change within a second of the answer (wall clock of the sample)
+    assert _first_frame_after(frames, t0)["wall_time"] - answered < 1.0
+
+
+def test_oscillation_toggle_visible_in_frames(finished_run) -> None:
+    resp, answered = finished_run["changes"]["oscillation"]
+    assert resp.status_code == 200, resp.text
+    t0 = resp.json()["applied_t"]
+    frames = finished_run["frames"]
+    assert all(f["eta"] == 0.0 for f in frames if f["t"] <= t0)
+    late = [abs(f["eta"]) for f in frames if f["t"] > t0 + 1.0]
+    # amplitude 0.03 m, period 2 s: over >= 5 s of frames |eta| comes near 0.03 m, never above
+    assert 0.02 < max(late) <= 0.03 + 1e-9
+    assert _first_frame_after(frames, t0)["wall_time"] - answered < 1.0
+    kinds = [(ch["kind"], ch["status"]) for ch in finished_run["body"]["changes"]]
+    assert kinds == [("reference", "applied"), ("oscillation", "applied")]
+
+
+def test_files_and_metrics(finished_run, small_cfg) -> None:
+    from twin.metrics import compute_metrics
+
+    assert finished_run["metrics"].status_code == 200
+    metrics = finished_run["metrics"].json()
+    z = np.load(io.BytesIO(finished_run["npz"].content))
+    for key in ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff", "field_hat", "field_true",
+                "t_field", "x", "y", "L_s", "W_s", "t_E", "setpoint", "scenario"):
+        assert key in z.files, key
+    n = len(z["t"])
+    assert n == round(SCENARIO["duration"] / small_cfg.sampling.t_s) + 1  # samples 0 .. duration
+    assert z["tc"].shape == (n, 4) and z["u"].shape == (n, 6)
+    assert z["field_hat"].shape[1:] == (small_cfg.specimen.ny, small_cfg.specimen.nx)
+    assert json.loads(str(z["scenario"]))["duration"] == SCENARIO["duration"]
+    # metrics.json is recomputable from timeseries.npz (product.md)
+    again = compute_metrics({k: z[k] for k in z.files})
+    for k, v in again.items():
+        if np.isnan(v):
+            assert metrics[k] is None, k  # a window the run did not reach is null in JSON
+        else:
+            assert metrics[k] == pytest.approx(v, rel=1e-9), k
+    assert json.loads((finished_run["folder"] / "metrics.json").read_text()) == metrics
+
+
+def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
+    rrd = finished_run["folder"] / "recording.rrd"
+    assert finished_run["rrd"].content == rrd.read_bytes()
+    rerun = Path(__file__).resolve().parents[2] / ".venv" / "bin" / "rerun"
+    env = {"HOME": str(isolated_home), "XDG_CONFIG_HOME": str(isolated_home / "cfg"),
+           "XDG_CACHE_HOME": str(isolated_home / "cache"), "XDG_DATA_HOME": str(isolated_home / "data"),
+           "PATH": "/usr/bin:/bin", "RERUN_ANALYTICS": "0"}
+    out = subprocess.run([str(rerun), "rrd", "stats", str(rrd)], capture_output=True, text=True, env=env,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    for entity in ("/field/estimated", "/field/true", "/field/fillet", "/field/tc", "/temperature/T_ref",
+                   "/temperature/T_mean_hat", "/tc/reading/TC1", "/tc/reading/TC4", "/tc/error/TC4",
+                   "/power/u/T1h", "/power/u_ff/T2v", "/eta", "/inhomogeneity/estimated"):
+        assert entity in out.stdout, entity
+    verify = subprocess.run([str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True, env=env,
+                            timeout=120)
+    assert verify.returncode == 0, verify.stderr[-2000:]
