@@ -449,12 +449,16 @@ class Plant:
         """Heat flow (W) into each cell from the lamps alone: -A P2(eta) u_lamp."""
         if self.radiation is None:
             return np.zeros(self.n)
-        S = self._S_L if per_lamp else self._S_G
+        P2 = self._P2L if per_lamp else self._P2G
+        v = v1[:-1]
         k, w = self._eta_index(eta)
-        q = S[k, :, :-1] @ v1[:-1]
-        if w > 0.0:
+        if w == 0.0:
+            q = P2[k] @ v
+        else:
+            r = P2[k : k + 2].reshape(2 * self.n, -1) @ v
+            q = r[: self.n]
             q *= 1.0 - w
-            q += w * (S[k + 1, :, :-1] @ v1[:-1])
+            q += w * r[self.n :]
         q *= -self.area
         return q
 
@@ -506,11 +510,13 @@ class Plant:
                 f1 = self._rate(T1, v1, per_lamp, eta_of_t(t + h))
                 T_new = T + (0.5 * h) * (f + f1)
             else:
-                Qg_p, C_p, eta_p, h_p = prev
-                f_p = (Qg_p + self._lamp_heat(v1, per_lamp, eta_p)) / C_p
+                Qg_p, C_p, eta_p, h_p, QL_p, v1_p, per_lamp_p = prev
+                if per_lamp != per_lamp_p or not np.array_equal(v1, v1_p):  # input changed
+                    QL_p = self._lamp_heat(v1, per_lamp, eta_p)
+                f_p = (Qg_p + QL_p) / C_p
                 r = h / (2.0 * h_p)
                 T_new = T + (h * (1.0 + r)) * f - (h * r) * f_p
-            prev = (Q - QL, C, eta_n, h)
+            prev = (Q - QL, C, eta_n, h, QL, v1, per_lamp)
             T = T_new
             t += h
         self._ab2_history = {"eta_fn": eta_of_t, "t_end": t, "T_end": T.copy(), "prev": prev}
