@@ -50,9 +50,14 @@ class ReferenceError(ValueError):
 class _SteadyModel(Protocol):
     """The part of ``twin.fe_model.DiscreteModel`` used here (docs/interfaces.md)."""
 
-    n: int
-    m: int
-    c_m: Array
+    @property
+    def n(self) -> int: ...
+
+    @property
+    def m(self) -> int: ...
+
+    @property
+    def c_m(self) -> Array: ...
 
     def step(self, theta: Array, u: Array) -> Array: ...
 
