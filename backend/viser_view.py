@@ -72,13 +72,12 @@ def vertex_values(field: np.ndarray) -> np.ndarray:
     return v.ravel()
 
 
-def plate_mesh(cfg: FurnaceConfig, field: np.ndarray, lo: float, hi: float) -> trimesh.Trimesh:
-    """Both faces of the specimen at eta = 0, per-vertex turbo colours of the field."""
+def plate_mesh(cfg: FurnaceConfig, colors: np.ndarray) -> trimesh.Trimesh:
+    """Both faces of the specimen at eta = 0 with per-vertex colours ((N_x+1)(N_y+1), 3) uint8."""
     verts, faces, _ = specimen_plate_mesh(cfg, 0.0)
     back = verts.copy()
     back[:, 2] = -back[:, 2]
     n = len(verts)
-    colors = turbo_rgb(vertex_values(field), lo, hi)
     return trimesh.Trimesh(
         vertices=np.vstack([verts, back]),
         faces=np.vstack([faces, faces[:, ::-1] + n]),
@@ -160,7 +159,8 @@ class FurnaceView:
                                                        color=(150, 155, 165), opacity=0.12, side="double",
                                                        visible=False, **NO_SHADOW))
         field = np.full((s.ny, s.nx), s.initial_temperature)
-        self.plate = sc.add_mesh_trimesh("/furnace/specimen", plate_mesh(self.cfg, field, 290.0, 310.0), **NO_SHADOW)
+        cold = turbo_rgb(vertex_values(field), 290.0, 310.0)
+        self.plate = sc.add_mesh_trimesh("/furnace/specimen", plate_mesh(self.cfg, cold), **NO_SHADOW)
         self.tc_markers = []
         self.tc_labels = []
         for k, (x, y) in enumerate(self.cfg.tc_positions()):
@@ -290,13 +290,12 @@ class FurnaceView:
         field = np.asarray(snap.field_hat, dtype=float)
         lo, hi = colour_range(field)
         eta = float(snap.eta)
-        mesh = plate_mesh(self.cfg, field, lo, hi)
-        colours = np.asarray(mesh.visual.vertex_colors)
+        colours = turbo_rgb(vertex_values(field), lo, hi)
         with self.server.atomic():
             if self._plate_rgb is None or not np.array_equal(colours, self._plate_rgb):
                 # a new GLB only when a vertex colour changed (each one costs the browser a parse)
                 self.plate = self.server.scene.add_mesh_trimesh(
-                    "/furnace/specimen", mesh, position=(eta, 0.0, 0.0), **NO_SHADOW)
+                    "/furnace/specimen", plate_mesh(self.cfg, colours), position=(eta, 0.0, 0.0), **NO_SHADOW)
                 self._plate_rgb = colours
             else:
                 self.plate.position = (eta, 0.0, 0.0)

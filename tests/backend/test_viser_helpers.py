@@ -1,0 +1,53 @@
+"""Pure helpers of the 3D view: vertex values, colour range, lamp colours."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from backend.viser_view import LAMP_OFF, LAMP_ON, MIN_SPAN_K, colour_range, lamp_colors, plate_mesh, turbo_rgb
+from twin.geometry import specimen_plate_mesh
+
+
+def test_vertex_values_of_a_linear_field_are_exact_inside(small_cfg) -> None:
+    from backend.viser_view import vertex_values
+
+    s = small_cfg.specimen
+    x = (np.arange(s.nx) + 0.5) / s.nx * s.length
+    y = (np.arange(s.ny) + 0.5) / s.ny * s.width
+    field = 700.0 + 900.0 * x[None, :] + 300.0 * y[:, None]  # (N_y, N_x), linear in x and y
+    v = vertex_values(field).reshape(s.ny + 1, s.nx + 1)
+    verts, _, _ = specimen_plate_mesh(small_cfg, 0.0)
+    vx = verts[:, 0].reshape(s.ny + 1, s.nx + 1)
+    vy = verts[:, 1].reshape(s.ny + 1, s.nx + 1)
+    exact = 700.0 + 900.0 * vx + 300.0 * vy
+    # the mean of the four cells around an interior vertex of a linear field is its value there
+    np.testing.assert_allclose(v[1:-1, 1:-1], exact[1:-1, 1:-1], rtol=0, atol=1e-9)
+
+
+def test_colour_range_is_stable_and_wide_enough() -> None:
+    f = np.array([[1093.2, 1097.9], [1101.4, np.nan]])
+    assert colour_range(f) == (1090.0, 1105.0)  # min/max widened to multiples of 5 K
+    lo, hi = colour_range(np.full((3, 3), 1100.0))
+    assert hi - lo == MIN_SPAN_K
+    assert colour_range(np.full((2, 2), np.nan)) == (290.0, 310.0)
+
+
+def test_turbo_ends_and_plate_mesh(small_cfg) -> None:
+    rgb = turbo_rgb(np.array([0.0, 300.0, 1e6]), 300.0, 1300.0)
+    assert rgb.dtype == np.uint8 and tuple(rgb[0]) == tuple(rgb[1])  # clipped below the range
+    s = small_cfg.specimen
+    colours = np.zeros(((s.nx + 1) * (s.ny + 1), 3), np.uint8)
+    mesh = plate_mesh(small_cfg, colours)
+    assert len(mesh.vertices) == 2 * (s.nx + 1) * (s.ny + 1)  # front and back face
+    assert len(mesh.faces) == 4 * s.nx * s.ny
+
+
+def test_lamp_colours_follow_their_group(small_cfg) -> None:
+    u = np.array([1.0, 0.0, 0.5, 0.0, 0.0, 0.25])
+    rgb = lamp_colors(small_cfg, u).astype(float)
+    G = small_cfg.group_matrix
+    for k in range(G.shape[0]):
+        frac = float(G[k] @ u)  # each lamp is in at most one group
+        np.testing.assert_allclose(rgb[k], np.floor(LAMP_OFF + frac * (LAMP_ON - LAMP_OFF)), atol=1.0)
+    ungrouped = np.where(G.sum(axis=1) == 0)[0]
+    assert len(ungrouped) > 0 and all(tuple(rgb[k]) == tuple(LAMP_OFF) for k in ungrouped)
