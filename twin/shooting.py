@@ -46,7 +46,6 @@ class StepModel(Protocol):
     @property
     def W(self) -> Array: ...
 
-
     def step(self, theta: Array, u: Array) -> Array: ...
 
     def jac_theta(self, theta: Array, u: Array) -> Array: ...
@@ -59,7 +58,6 @@ class InputMap(Protocol):
 
     @property
     def n_params(self) -> int: ...
-
 
     def inputs(self, p: Array) -> Array:
         """U (K, m): the input held over interval k."""
