@@ -65,11 +65,12 @@ class _Server:
 
 
 def _post(port: int, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
-    import httpx
+    import urllib.request
 
-    r = httpx.post(f"http://127.0.0.1:{port}{path}", json=body, timeout=60)
-    r.raise_for_status()
-    result: dict[str, Any] = r.json()
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", data=json.dumps(body or {}).encode(),
+                                 headers={"Content-Type": "application/json"}, method="POST")
+    with urllib.request.urlopen(req, timeout=60) as r:  # raises on 4xx / 5xx
+        result: dict[str, Any] = json.loads(r.read())
     return result
 
 

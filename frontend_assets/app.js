@@ -229,6 +229,7 @@ function connectStream(runId) {
     state.frames += 1;
     pushFrame(f);
     $("run-clock").textContent = `t = ${fmt(f.t)} s`;
+    if (f.events && f.events.length) showMsg(`t = ${fmt(f.t)} s: ${f.events.join("; ")}`);
     if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
     state.dirty = true;
   };
