@@ -85,6 +85,14 @@ def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:
         # the run is over: controls answer 409
         assert c.post(f"/api/runs/{run_id}/stop").status_code == 409
         assert c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": False}).status_code == 409
+        # a client of an ended run gets its last frame, then the stream closes
+        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+            last = json.loads(ws.receive_text())
+            assert last["status"] == "finished" and last["t"] == pytest.approx(6.0)
+            from starlette.websockets import WebSocketDisconnect
+
+            with pytest.raises(WebSocketDisconnect):
+                ws.receive_text()
         listed = c.get("/api/runs").json()
         assert [r["id"] for r in listed] == [run_id]
 
