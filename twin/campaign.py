@@ -11,13 +11,17 @@ from __future__ import annotations
 import json
 import logging
 import sys
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from twin.config import FurnaceConfig
 from twin.scenario import OscillationSpec, Scenario, TransitionReference
+
+if TYPE_CHECKING:
+    from twin.runner import SinkFactory
 
 log = logging.getLogger(__name__)
 
@@ -93,13 +97,24 @@ def campaign_table(experiments: list[dict[str, Any]]) -> str:
     return "\n".join(rows)
 
 
-def run_campaign(cfg: FurnaceConfig, out: Path, t_E: float = 120.0, radiation: Any = None) -> dict[str, Any]:
-    """Run the six experiments; return the product.md ``campaign --json`` object."""
+def run_campaign(
+    cfg: FurnaceConfig,
+    out: Path,
+    t_E: float = 120.0,
+    radiation: Any = None,
+    sink_factories: Iterable[SinkFactory] = (),
+) -> dict[str, Any]:
+    """Run the six experiments; return the product.md ``campaign --json`` object.
+
+    The three runs of each specimen mode start identically, so their first plan is solved once.
+    """
     from twin.figures import plot_homogeneity_comparison
     from twin.loop import ClosedLoop
     from twin.radiation import radiation_model
     from twin.runner import _json_safe, execute_run
 
+    plan_cache: dict[Any, Any] = {}
+    sinks = list(sink_factories)
     rad = radiation if radiation is not None else radiation_model(cfg)
     out.mkdir(parents=True, exist_ok=True)
     experiments: list[dict[str, Any]] = []
@@ -107,8 +122,8 @@ def run_campaign(cfg: FurnaceConfig, out: Path, t_E: float = 120.0, radiation: A
     for name, scenario in campaign_scenarios(cfg, t_E):
         log.info("campaign: %s", name)
         folder = out / name
-        loop = ClosedLoop(cfg, scenario, rad)
-        result = execute_run(loop, folder)
+        loop = ClosedLoop(cfg, scenario, rad, plan_cache=plan_cache)
+        result = execute_run(loop, folder, sink_factories=sinks)
         series[name] = loop.timeseries()
         metrics = _json_safe({k: v for k, v in result.items() if k != "out"})
         experiments.append(
@@ -136,13 +151,13 @@ def run_campaign(cfg: FurnaceConfig, out: Path, t_E: float = 120.0, radiation: A
     return result
 
 
-def campaign_command(cfg: FurnaceConfig, args: Any) -> int:
+def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
     t_E = float(args.t_e) if args.t_e else 120.0
     if t_E <= 1.0:
         print("furnace-twin campaign: --t-e must be > 1 s", file=sys.stderr)  # noqa: T201
         return 2
     out = Path(args.out)
-    result = run_campaign(cfg, out, t_E)
+    result = run_campaign(cfg, out, t_E, sink_factories=sink_factories)
     if args.json:
         print(json.dumps(result))  # noqa: T201
     else:

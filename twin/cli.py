@@ -113,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "campaign":
             from twin.campaign import campaign_command
 
-            return campaign_command(cfg, args)
+            return campaign_command(cfg, args, sink_factories=[_recording_sink(cfg)])
         if args.command == "bench":
             from twin.bench import bench_command
 

@@ -275,7 +275,9 @@ class ClosedLoop:
 
     @property
     def replanning(self) -> bool:
-        return self._pending is not None
+        """A re-plan is being solved in the background (it is swapped in at the next sample when done)."""
+        p = self._pending
+        return p is not None and not p.future.done()
 
     def step(self) -> Snapshot:
         """Advance one sample; return the snapshot of sample j (before the plant moves on)."""
