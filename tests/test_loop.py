@@ -126,3 +126,15 @@ def test_background_replanning_does_not_stall_the_loop(small_radiation, plans):
     s = loop.step()  # swapped in at the first sample after the plan is ready
     assert any("re-planned" in e for e in s.events)
     loop.close()
+
+
+def test_unreachable_reference_is_refused_and_changes_nothing(small_radiation, plans):
+    from twin.scenario import PointsReference
+
+    loop = ClosedLoop(small_config(), _scenario(duration=10.0), small_radiation, plan_cache=plans)
+    before = loop.step().T_ref
+    # 260 K is colder than every surrounding surface (coldest is the 300 K gas inlet): unreachable
+    with pytest.raises(ValueError, match="K"):
+        loop.set_reference(PointsReference(points=[(5.0, 260.0)]))
+    s = loop.step()
+    assert not s.events and s.T_ref >= before

@@ -164,8 +164,8 @@ class ClosedLoop:
         y0 = self._read_tcs(0.0)
         theta0 = np.full(self._fe_nodes(), float(np.mean(y0[:3])))
         self._reference_spec: Reference = scenario.reference
-        self._T_initial = float(np.mean(y0[:3]))
-        self._ref_fn = self._make_reference(scenario.reference, self._T_initial, t_shift=0.0)
+        self._T_range = self._reachable_range()
+        self._ref_fn = self._make_reference(scenario.reference, float(np.mean(y0[:3])), t_start=0.0)
         key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes())
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
@@ -197,14 +197,18 @@ class ClosedLoop:
     def _read_tcs(self, t: float) -> Array:
         return self.thermocouples.read(self._T, self._rng, self.scenario.tc_noise)
 
-    @staticmethod
-    def _make_reference(spec: Reference, T_initial: float, t_shift: float) -> Callable[[Any], Any]:
+    def _reachable_range(self) -> tuple[float, float]:
+        """Fillet means the (nominal, fixed-specimen) model can hold: coldest surrounding .. full power."""
+        from twin.fe_model import discrete_model
+        from twin.reference import reachable_range
+
+        return reachable_range(discrete_model(self.cfg, self.radiation, None), self.cfg)
+
+    def _make_reference(self, spec: Reference, T_initial: float, t_start: float) -> Callable[[Any], Any]:
+        """T_ref(t) of run time; raises ValueError (ReferenceError) for unreachable temperatures."""
         from twin.reference import reference_trajectory
 
-        fn = reference_trajectory(spec, T_initial)
-        if t_shift == 0.0:
-            return fn
-        return lambda t: fn(np.asarray(t, float) - t_shift)
+        return reference_trajectory(spec, T_initial, t_start=t_start, T_range=self._T_range)
 
     def _plan(
         self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any
@@ -223,12 +227,16 @@ class ClosedLoop:
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> None:
-        """New reference from now on (times of a points reference count from now); re-plans."""
+        """New reference from now on (times of a points reference count from now); re-plans.
+
+        Raises ValueError, before anything changes, if the reference is unreachable.
+        """
         with self._lock:
             t_now = self.j * self.t_s
             T_now = float(self._ctl.model.c_m @ self.estimator.state.theta)
+            ref_fn = self._make_reference(spec, T_now, t_start=t_now)
             self._reference_spec = spec
-            self._ref_fn = self._make_reference(spec, T_now, t_shift=t_now)
+            self._ref_fn = ref_fn
             self._start_replan(self._oscillation, f"reference changed at t = {t_now:.1f} s")
 
     def set_oscillation(self, spec: OscillationSpec) -> None:
