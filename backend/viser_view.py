@@ -107,6 +107,7 @@ class FurnaceView:
         self._last_seq = -1
         self._lamp_rgb: np.ndarray | None = None
         self._plate_rgb: np.ndarray | None = None
+        self._shown: tuple[str, SnapshotLike] | None = None
 
     @property
     def url(self) -> str:
@@ -279,7 +280,13 @@ class FurnaceView:
                 run = self.manager.active.get(run_id) if run_id else None
                 if run is not None and run.worker.latest is not None and run.worker.seq != self._last_seq:
                     self._last_seq = run.worker.seq
+                    self._shown = (run_id or "", run.worker.latest)
                     self.show(run.worker.latest, run_id or "", run.status)
+                elif run is None and self._shown is not None:  # the run ended: say how
+                    shown_id, snap = self._shown
+                    row = self.manager.repo.get(shown_id)
+                    self.md_status.content = self._status_text(snap, shown_id, row.status if row else "ended")
+                    self._shown = None
             except Exception:
                 log.exception("viser update failed")
             self._stop.wait(max(period - (time.monotonic() - t0), 0.0))
@@ -310,11 +317,15 @@ class FurnaceView:
                 self.tc_markers[k].position = (x + eta, y, 0.0)
                 reading = float(np.asarray(snap.tc)[k])
                 self.tc_labels[k].text = f"TC{k + 1} {reading:.1f} K" if np.isfinite(reading) else f"TC{k + 1} –"
-        self.md_status.content = (
-            f"**run `{run_id}`** · {status}  \n t = {snap.t:.1f} s · η = {1000 * eta:.1f} mm  \n"
+        self.md_status.content = self._status_text(snap, run_id, status)
+        self.md_legend.content = f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)"
+
+    @staticmethod
+    def _status_text(snap: SnapshotLike, run_id: str, status: str) -> str:
+        return (
+            f"**run `{run_id}`** · {status}  \n t = {snap.t:.1f} s · η = {1000 * float(snap.eta):.1f} mm  \n"
             f"T_ref = {snap.T_ref:.1f} K · mean (est.) = {snap.T_mean_hat:.1f} K"
         )
-        self.md_legend.content = f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)"
 
     def _tc4(self, run_id: str) -> tuple[float, float] | None:
         run = self.manager.active.get(run_id)

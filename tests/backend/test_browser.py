@@ -68,26 +68,16 @@ def test_dashboard_live_run(server, browser, artifacts, small_cfg) -> None:
 
 
 def test_viser_then_stop_from_dashboard(server, browser, artifacts) -> None:
-    """The 3D view follows the run; then the dashboard's Stop ends it and its data stays."""
+    """The 3D view follows the run and draws the plate; the dashboard's Stop ends the run and its
+    data stays.  The screenshot is taken after the stop: a still scene renders in a few seconds in
+    software WebGL, a live one (5 updates/s) takes 10-40 s per screenshot on a loaded machine."""
     from PIL import Image
 
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     page.goto(server.viser_url)
     page.wait_for_selector("canvas", timeout=60_000)
     page.wait_for_selector("text=T_ref", timeout=60_000)  # the GUI follows the run of the dashboard test
-    time.sleep(3.0)  # software WebGL: let a few frames render
-    path = artifacts / "viser.png"
-    page.screenshot(path=str(path), timeout=180_000)  # software WebGL on a loaded machine: 10-40 s
-    # left: the axes gizmo (bottom-left corner); right: the GUI panel with its blue buttons
-    img = np.asarray(Image.open(path).convert("RGB")).astype(int)[:, 100:900]
-    r, g, b = img[..., 0], img[..., 1], img[..., 2]
-    # the plate's turbo colours span its own min..max, so its hottest part is dark red/orange once a
-    # run is shown; nothing else in the scene (gold, grey, yellow lamps, white, light-blue window)
-    # is red.  Before any run the uniform plate is green and the count is 0 (measured); a drawn
-    # run plate gives thousands (measured 2400-4300), partly hidden by the lamps.
-    red = np.sum((r > 140) & (g < 110) & (b < 80))
-    assert red > 500, red
-    page.close()
+    time.sleep(2.0)  # a few scene updates of the running run
 
     dash = browser.new_page(viewport={"width": 1280, "height": 800})
     dash.goto(server.url)
@@ -98,3 +88,18 @@ def test_viser_then_stop_from_dashboard(server, browser, artifacts) -> None:
     assert run["status"] == "stopped" and run["files"]["timeseries"] and run["files"]["recording"]
     assert 0.0 < run["latest"]["t"] < 600.0  # stopped before the 600 s duration
     dash.close()
+
+    page.bring_to_front()
+    page.wait_for_selector("text=· stopped", timeout=60_000)  # the 3D view's status follows the run's end
+    path = artifacts / "viser.png"
+    page.screenshot(path=str(path), timeout=180_000)
+    # left: the axes gizmo (bottom-left corner); right: the GUI panel with its blue buttons
+    img = np.asarray(Image.open(path).convert("RGB")).astype(int)[:, 100:900]
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    # the plate's turbo colours span its own min..max, so its hottest part is dark red/orange once a
+    # run is shown; nothing else in the scene (gold, grey, yellow lamps, white, light-blue window)
+    # is red.  Before any run the uniform plate is green and the count is 0 (measured); a drawn
+    # run plate gives thousands (measured 2400-4300), partly hidden by the lamps.
+    red = np.sum((r > 140) & (g < 110) & (b < 80))
+    assert red > 500, red
+    page.close()
