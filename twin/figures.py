@@ -118,11 +118,12 @@ def plot_run_field(ts: Mapping[str, Any], path: Path, title: str = "") -> Path:
     k15 = _nearest(tf, min(1.5 * t_E, tf[-1]))
     k05 = _nearest(tf, 0.5 * t_E)
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), constrained_layout=True)
+    fig.get_layout_engine().set(wspace=0.06)  # type: ignore[union-attr]  # room between colorbar and (B)
     rel = 100 * field[k15] / scale
     im = ax[0].imshow(
         rel, origin="lower", extent=(0, 100 * L_s, 0, 100 * W_s), cmap="turbo", aspect="equal", interpolation="bilinear"
     )
-    fig.colorbar(im, ax=ax[0], label="T / T_ref(t_E) (%)", shrink=0.8)
+    fig.colorbar(im, ax=ax[0], label="T / T_ref(t_E) (%)", shrink=0.8, pad=0.02)
     ax[0].add_patch(
         Rectangle((25 * L_s, 20 * W_s), 50 * L_s, 60 * W_s, fill=False, ec="w", lw=1.5, ls="--", label="fillet")
     )
