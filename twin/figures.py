@@ -19,6 +19,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.layout_engine import ConstrainedLayoutEngine  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from twin.metrics import fillet_mask, sup_norm  # noqa: E402
@@ -117,8 +118,7 @@ def plot_run_field(ts: Mapping[str, Any], path: Path, title: str = "") -> Path:
     tcp = np.asarray(ts["tc_positions"], float) if "tc_positions" in ts else None
     k15 = _nearest(tf, min(1.5 * t_E, tf[-1]))
     k05 = _nearest(tf, 0.5 * t_E)
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), constrained_layout=True)
-    fig.get_layout_engine().set(wspace=0.06)  # type: ignore[union-attr]  # room between colorbar and (B)
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), layout=ConstrainedLayoutEngine(wspace=0.06))
     rel = 100 * field[k15] / scale
     im = ax[0].imshow(
         rel, origin="lower", extent=(0, 100 * L_s, 0, 100 * W_s), cmap="turbo", aspect="equal", interpolation="bilinear"
