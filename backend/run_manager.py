@@ -160,6 +160,9 @@ class RunManager:
         aio = asyncio.get_running_loop()
         w = run.worker
         min_interval = 1.0 / self.settings.stream_max_hz
+        # real time x speed makes speed / t_s samples per second; at or below the cap, no sample is
+        # skipped even when two of them fall into one advance() call (a late worker catching up)
+        every_sample = w.speed is not None and w.speed / self.cfg.sampling.t_s <= self.settings.stream_max_hz
         last_pub = -1e9
         final = "finished"
         error: str | None = None
@@ -170,6 +173,10 @@ class RunManager:
             while True:
                 adv = await aio.run_in_executor(run.executor, w.advance, ADVANCE_BUDGET_S)
                 now = time.monotonic()
+                if every_sample:  # the samples come slower than the frame cap: send each one
+                    for snap, seq, wall in adv.samples:
+                        run.hub.publish(frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=run.status))
+                        run.published_seq = seq
                 pending = w.seq != run.published_seq
                 if pending and now - last_pub >= min_interval:
                     self._publish(run_id, run)

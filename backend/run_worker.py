@@ -63,6 +63,7 @@ class Advance:
     seq: int
     wall_time: float
     steps: int
+    samples: tuple[tuple[SnapshotLike, int, float], ...]  # (snapshot, seq, wall time) of this call
     finished: bool
     wait_s: float
 
@@ -186,6 +187,7 @@ class RunWorker:
         assert self.loop is not None
         start = time.monotonic()
         steps = 0
+        samples: list[tuple[SnapshotLike, int, float]] = []
         t_s = self.cfg.sampling.t_s
         wait = 0.0
         while not self.stop_requested.is_set() and not self._finished():
@@ -201,6 +203,7 @@ class RunWorker:
             self.latest, self.latest_wall = snap, time.time()
             self.seq += 1
             steps += 1
+            samples.append((snap, self.seq, self.latest_wall))
             if self.recording is not None:
                 self.recording.add(snap)
             wait = 0.0
@@ -208,7 +211,8 @@ class RunWorker:
                 break
         if time.monotonic() - self._last_flush >= self.settings.flush_interval_s:
             self.flush()
-        return Advance(self.latest, self.seq, self.latest_wall, steps, self._finished(), max(wait, 0.0))
+        return Advance(self.latest, self.seq, self.latest_wall, steps, tuple(samples), self._finished(),
+                       max(wait, 0.0))
 
     # ---- persistence (worker thread) ----
     def _timeseries(self) -> dict[str, Any] | None:
