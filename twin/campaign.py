@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.config import FurnaceConfig
+from twin.metrics import METRIC_KEYS
 from twin.scenario import OscillationSpec, Scenario, TransitionReference
 
 if TYPE_CHECKING:
@@ -47,17 +48,6 @@ PAPER: dict[str, dict[str, float]] = {
     },
 }
 
-TABLE_KEYS = (
-    "mean_error_transient_max",
-    "mean_error_steady_max",
-    "tc123_error_max",
-    "tc4_error_transient_max",
-    "tc4_error_steady_max",
-    "inhomogeneity_transient_max",
-    "inhomogeneity_steady",
-    "true_inhomogeneity_steady",
-    "field_estimation_error_steady_max",
-)
 
 
 def campaign_scenarios(cfg: FurnaceConfig, t_E: float = 120.0) -> list[tuple[str, Scenario]]:
@@ -90,7 +80,7 @@ def campaign_table(experiments: list[dict[str, Any]]) -> str:
     head = "| metric | paper fixed | paper osc. | " + " | ".join(e["name"] for e in experiments) + " |"
     sep = "|" + "---|" * (3 + len(experiments))
     rows = [head, sep]
-    for key in TABLE_KEYS:
+    for key in METRIC_KEYS:
         cells = [key, _fmt(PAPER["fixed"].get(key)), _fmt(PAPER["oscillating"].get(key))]
         cells += [_fmt(e["metrics"].get(key)) for e in experiments]
         rows.append("| " + " | ".join(cells) + " |")

@@ -57,13 +57,14 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from twin.config import FurnaceConfig
+from twin.dynamics import DiscreteDynamics
 from twin.shooting import CoarseShooting, FreeInputs, ScaledDistribution, casadi_objective
 
 log = logging.getLogger(__name__)
@@ -89,31 +90,6 @@ WARM_FLOOR = 0.05
 SETTLE_TIME_CONSTANTS = 2.0
 #: Longest reference the horizon search looks at (s): scenario.MAX_DURATION_S.
 MAX_REFERENCE_S = 3600.0
-
-
-class DiscreteModelLike(Protocol):
-    """The part of ``twin.fe_model.DiscreteModel`` used here (docs/interfaces.md)."""
-
-    @property
-    def n(self) -> int: ...
-
-    @property
-    def m(self) -> int: ...
-
-    @property
-    def t_s(self) -> float: ...
-
-    @property
-    def c_m(self) -> Array: ...
-
-    @property
-    def W(self) -> Array: ...
-
-    def step(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_theta(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_u(self, theta: Array, u: Array) -> Array: ...
 
 
 class FeedforwardError(RuntimeError):
@@ -215,7 +191,7 @@ class FeedforwardPlan:
 
 
 # --------------------------------------------------------------------------- helpers
-def simulate(model: DiscreteModelLike, theta0: ArrayLike, u: ArrayLike) -> Array:
+def simulate(model: DiscreteDynamics, theta0: ArrayLike, u: ArrayLike) -> Array:
     """theta_0..theta_N of eq. (12a) with w = 0 under the inputs u (N, m); shape (N + 1, n)."""
     uu = np.asarray(u, float)
     out = np.empty((uu.shape[0] + 1, model.n))
@@ -247,7 +223,7 @@ def transition_end(ref: RefFn, t0: float, t_s: float) -> float:
     return float(t[moving[-1] + 1]) if moving.size else float(t0)
 
 
-def mean_time_constant(model: DiscreteModelLike, theta: ArrayLike, u: ArrayLike) -> float:
+def mean_time_constant(model: DiscreteDynamics, theta: ArrayLike, u: ArrayLike) -> float:
     """tau (s) of the fillet mean: 1 / (-c_m^T J 1), J = (dF/dtheta - I) / t_s (eqs. 12a, 16, 19).
 
     -c_m^T J 1 is the rate (1/s) at which the fillet mean relaxes after a uniform
@@ -259,12 +235,12 @@ def mean_time_constant(model: DiscreteModelLike, theta: ArrayLike, u: ArrayLike)
     return 1.0 / max(rate, 1e-6)
 
 
-def _fastest_rate(model: DiscreteModelLike, theta: Array, u: Array) -> float:
+def _fastest_rate(model: DiscreteDynamics, theta: Array, u: Array) -> float:
     J = (np.asarray(model.jac_theta(theta, u), float) - np.eye(model.n)) / model.t_s
     return float(np.max(np.abs(np.linalg.eigvals(J))))
 
 
-def _heun_interval(model: DiscreteModelLike, theta: Array, u: Array, dt: float, n_heun: int) -> Array:
+def _heun_interval(model: DiscreteDynamics, theta: Array, u: Array, dt: float, n_heun: int) -> Array:
     """theta after dt under constant u: Heun substeps on f = (F - theta) / t_s (eq. 12a)."""
     h = dt / n_heun
     for _ in range(n_heun):
@@ -275,7 +251,7 @@ def _heun_interval(model: DiscreteModelLike, theta: Array, u: Array, dt: float, 
     return theta
 
 
-def _tracking_amplification(model: DiscreteModelLike, dt: float, n_heun: int, T_knots: Array, th0: Array,
+def _tracking_amplification(model: DiscreteDynamics, dt: float, n_heun: int, T_knots: Array, th0: Array,
                             d: Array, width: float) -> Array:
     """v_k per interval such that u = smin(v_k d) brings c_m^T theta to T_ref at the next knot.
 
@@ -379,7 +355,7 @@ def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | Non
 
 
 def solve_feedforward(
-    model: DiscreteModelLike,
+    model: DiscreteDynamics,
     theta0: ArrayLike,
     t0: float,
     T_ref_fn: RefFn,
@@ -435,7 +411,7 @@ def solve_feedforward(
                                   interval, best_effort, max_iter, max_wall_s, ipopt_options)
 
 
-def _solve_feedforward(model: DiscreteModelLike, theta0: ArrayLike, t0: float, T_ref_fn: RefFn,
+def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_ref_fn: RefFn,
                        cfg: FurnaceConfig, warm_start: FeedforwardPlan | None, parametrized: bool,
                        horizon: float | None, interval: float, best_effort: bool, max_iter: int,
                        max_wall_s: float, ipopt_options: dict[str, Any] | None) -> FeedforwardPlan:
@@ -541,7 +517,7 @@ def _solve_feedforward(model: DiscreteModelLike, theta0: ArrayLike, t0: float, T
     return plan
 
 
-def heating_efficiency(model: DiscreteModelLike, theta: Array) -> Array:
+def heating_efficiency(model: DiscreteDynamics, theta: Array) -> Array:
     """eta_i = c_m^T dF/du_i / t_s: fillet-mean heating rate (K/s) per unit fraction of group i,
     normalized to mean 1 (eqs. 12a, 19).  Used to normalize the distribution: eta^T d = 1."""
     B = np.asarray(model.jac_u(theta, np.full(model.m, 0.5)), float) / model.t_s
@@ -551,7 +527,7 @@ def heating_efficiency(model: DiscreteModelLike, theta: Array) -> Array:
     return np.asarray(eta / eta.mean(), float)
 
 
-def _parametrized_guess(model: DiscreteModelLike, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
+def _parametrized_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
                         warm: FeedforwardPlan | None, eta: Array, width: float) -> Array:
     """Initial (d, v) with eta^T d = 1.
 
@@ -573,7 +549,7 @@ def _parametrized_guess(model: DiscreteModelLike, grid: _Grid, n_heun: int, T_kn
     return np.concatenate([d, v])
 
 
-def _free_guess(model: DiscreteModelLike, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
+def _free_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
                 warm: FeedforwardPlan | None, width: float) -> Array:
     """Initial free inputs (K, m) row-major: the previous plan's inputs on the new intervals
     if given, else uniform mean-tracking inputs."""

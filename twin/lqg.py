@@ -24,38 +24,18 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from twin.config import FurnaceConfig
+from twin.dynamics import DiscreteDynamics
 from twin.feedforward import FeedforwardPlan
 
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
-
-
-class LinearizableModel(Protocol):
-    """The part of ``twin.fe_model.DiscreteModel`` the LQG design uses (docs/interfaces.md)."""
-
-    @property
-    def n(self) -> int: ...
-
-    @property
-    def m(self) -> int: ...
-
-    @property
-    def t_s(self) -> float: ...
-
-    @property
-    def c_m(self) -> Array: ...
-
-    def jac_theta(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_u(self, theta: Array, u: Array) -> Array: ...
 
 
 class RiccatiError(ArithmeticError):
@@ -191,7 +171,7 @@ class Gains:
         return self.K[j] if 0 <= j < self.K.shape[0] else self.K_terminal
 
 
-def lqg_gains(model: LinearizableModel, plan: FeedforwardPlan, cfg: FurnaceConfig, *,
+def lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig, *,
               jacobian_every: int = 1) -> Gains:
     """Time-varying LQ gains along a plan, eqs. (23)-(29).
 
@@ -219,7 +199,7 @@ def lqg_gains(model: LinearizableModel, plan: FeedforwardPlan, cfg: FurnaceConfi
         return _lqg_gains(model, plan, cfg, jacobian_every)
 
 
-def _lqg_gains(model: LinearizableModel, plan: FeedforwardPlan, cfg: FurnaceConfig,
+def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig,
                jacobian_every: int) -> Gains:
     t_start = time.perf_counter()
     w = cfg.lqg
@@ -333,7 +313,7 @@ class Controller:
     Example (the loop): ``u, u_ff, du = controller.control(j, theta_hat)``.
     """
 
-    model: LinearizableModel
+    model: DiscreteDynamics
     plan: FeedforwardPlan
     gains: Gains
     cfg: FurnaceConfig
@@ -358,7 +338,7 @@ class Controller:
         return self.control(self.plan.index_at(t), theta_hat)
 
     def with_plan(self, plan: FeedforwardPlan, gains: Gains,
-                  model: LinearizableModel | None = None) -> Controller:
+                  model: DiscreteDynamics | None = None) -> Controller:
         """A controller on a new plan (after a re-plan) that keeps the integrator state."""
         return Controller(model or self.model, plan, gains, self.cfg,
                           IntegratorState(self.state.e_I, self.state.frozen))

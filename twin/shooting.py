@@ -25,32 +25,9 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.dynamics import DiscreteDynamics
+
 Array = NDArray[np.float64]
-
-
-class StepModel(Protocol):
-    """The part of ``twin.fe_model.DiscreteModel`` used here (docs/interfaces.md)."""
-
-    @property
-    def n(self) -> int: ...
-
-    @property
-    def m(self) -> int: ...
-
-    @property
-    def t_s(self) -> float: ...
-
-    @property
-    def c_m(self) -> Array: ...
-
-    @property
-    def W(self) -> Array: ...
-
-    def step(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_theta(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_u(self, theta: Array, u: Array) -> Array: ...
 
 
 class InputMap(Protocol):
@@ -177,7 +154,7 @@ class CoarseShooting:
     reg : (n_params,) optional weights rho_i of a Tikhonov term sum_i rho_i p_i^2 (K^2)
     """
 
-    def __init__(self, model: StepModel, theta0: Array, dt: float, n_heun: int, T_knots: Array,
+    def __init__(self, model: DiscreteDynamics, theta0: Array, dt: float, n_heun: int, T_knots: Array,
                  weights: Array, g0: float, g1: float, inputs: InputMap, reg: Array | None = None) -> None:
         self.model = model
         self.theta0 = np.asarray(theta0, float)
