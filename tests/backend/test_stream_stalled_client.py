@@ -58,7 +58,9 @@ def test_stalled_client_does_not_slow_run_or_others(tmp_path, small_cfg) -> None
         # the run kept its pace: 6 simulated s at speed 5 = 1.2 s of sample wall time
         wall = live[-1]["wall_time"] - live[0]["wall_time"]
         sim = live[-1]["t"] - live[0]["t"]
-        assert abs(wall - sim / speed) < 0.15, (wall, sim)  # one event-loop delay of slack
+        # a blocked loop would wait for the stalled client's 10 s timeout; 0.5 s of slack tells the two
+        # apart without flaking on a loaded 2-core machine
+        assert abs(wall - sim / speed) < 0.5, (wall, sim)
         # the healthy client got the capped rate: 50 samples/s -> 20 frames/s over ~1.2 s
-        assert (len(live) - 1) / wall > 15.0
+        assert (len(live) - 1) / wall > 10.0  # well above what a blocked loop would deliver (< 1/s)
         assert c.get(f"/api/runs/{run_id}").json()["status"] == "finished"
