@@ -29,13 +29,13 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicHermiteSpline, PchipInterpolator
 
 from twin.config import FurnaceConfig
+from twin.dynamics import DiscreteDynamics
 from twin.scenario import PointsReference, TransitionReference
 
 log = logging.getLogger(__name__)
@@ -45,23 +45,6 @@ Array = NDArray[np.float64]
 
 class ReferenceError(ValueError):
     """A reference trajectory cannot be followed (unreachable temperature, bad times)."""
-
-
-class _SteadyModel(Protocol):
-    """The part of ``twin.fe_model.DiscreteModel`` used here (docs/interfaces.md)."""
-
-    @property
-    def n(self) -> int: ...
-
-    @property
-    def m(self) -> int: ...
-
-    @property
-    def c_m(self) -> Array: ...
-
-    def step(self, theta: Array, u: Array) -> Array: ...
-
-    def jac_theta(self, theta: Array, u: Array) -> Array: ...
 
 
 @dataclass(frozen=True)
@@ -219,7 +202,7 @@ def coldest_surrounding(cfg: FurnaceConfig) -> float:
     )
 
 
-def steady_state(model: _SteadyModel, u: ArrayLike, theta_guess: ArrayLike, *, tol: float = 1e-6,
+def steady_state(model: DiscreteDynamics, u: ArrayLike, theta_guess: ArrayLike, *, tol: float = 1e-6,
                  max_iter: int = 50) -> Array:
     """Fixed point theta = F(theta, u) of the discrete model (eq. 12a) by Newton's method.
 
@@ -254,7 +237,7 @@ def steady_state(model: _SteadyModel, u: ArrayLike, theta_guess: ArrayLike, *, t
     raise ReferenceError("steady state of the model did not converge")
 
 
-def reachable_range(model: _SteadyModel, cfg: FurnaceConfig) -> tuple[float, float]:
+def reachable_range(model: DiscreteDynamics, cfg: FurnaceConfig) -> tuple[float, float]:
     """Fillet mean temperatures (K) the furnace can hold: (coldest surrounding, full power).
 
     The upper end is c_m^T theta_s (eq. 19) of the model's steady state with every

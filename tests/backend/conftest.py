@@ -17,27 +17,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from twin.loop import Snapshot  # the real snapshot type: the stand-in loop differs only in physics
+
 REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault("FURNACE_TWIN_CACHE", str(REPO / ".cache" / "test-radiation"))
 ARTIFACTS = REPO / "test-artifacts"
-
-
-@dataclass(frozen=True)
-class FakeSnapshot:
-    t: float
-    eta: float
-    T_ref: float
-    T_mean_hat: float
-    field_hat: Any
-    field_true: Any
-    tc: Any
-    tc_hat: Any
-    u: Any
-    u_ff: Any
-    inhomogeneity: float
-    true_mean: float
-    true_inhomogeneity: float
-    events: tuple[str, ...] = ()
 
 
 @dataclass
@@ -56,7 +40,7 @@ class FakeLoop:
     T: float = 300.0
     reference: Any = None
     oscillation: Any = None
-    rows: list[FakeSnapshot] = field(default_factory=list)
+    rows: list[Snapshot] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.reference = self.scenario.reference
@@ -72,7 +56,7 @@ class FakeLoop:
             return float(np.interp(t, [p[0] for p in r.points], [p[1] for p in r.points]))
         return 300.0 + (r.setpoint - 300.0) * min(t / r.t_E, 1.0)
 
-    def step(self) -> FakeSnapshot:
+    def step(self) -> Snapshot:
         if self.step_cost_s:
             end = time.perf_counter() + self.step_cost_s
             while time.perf_counter() < end:
@@ -85,8 +69,9 @@ class FakeLoop:
         eta = o.amplitude * math.sin(2 * math.pi * self.t / o.period) if o.enabled else 0.0
         s = self.cfg.specimen
         field_ = np.full((s.ny, s.nx), self.T) + np.linspace(-5, 5, s.nx)[None, :]
-        snap = FakeSnapshot(
-            t=self.t, eta=eta, T_ref=ref, T_mean_hat=self.T, field_hat=field_, field_true=field_ + 1.0,
+        snap = Snapshot(
+            j=len(self.rows), t=self.t, eta=eta, T_ref=ref, T_mean_hat=self.T,
+            field_hat=field_, field_true=field_ + 1.0,
             tc=np.full(4, self.T + 0.5), tc_hat=np.full(4, self.T), u=np.full(6, 0.5), u_ff=np.full(6, 0.4),
             inhomogeneity=5.0, true_mean=self.T + 1.0, true_inhomogeneity=6.0,
         )
