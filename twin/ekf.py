@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,20 +40,6 @@ from twin.config import FurnaceConfig
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
-
-_blas_controller: Any = None
-
-
-def single_threaded_blas() -> Any:
-    """Context manager limiting BLAS to one thread: the EKF's 100x100 products only lose from threads
-    on shared cores (measured 30 ms instead of 0.3 ms per predict on a loaded 2-core box)."""
-    global _blas_controller
-    if _blas_controller is None:
-        from threadpoolctl import ThreadpoolController
-
-        _blas_controller = ThreadpoolController()
-    return _blas_controller.limit(limits=1, user_api="blas")
-
 
 class Dynamics(Protocol):
     """A discrete-time model theta_{j+1} = F(theta_j, u_j) with its Jacobian (e.g. DiscreteModel)."""
@@ -181,15 +167,13 @@ class Estimator:
 
     def update(self, y: ArrayLike) -> EKFState:
         """Measurement update (13) with the readings of TC1..3 (K); faulty readings are left out."""
-        with single_threaded_blas():
-            self.state, self.last_info = ekf_update(self.state, y, self.C, self.R, self.gate)
+        self.state, self.last_info = ekf_update(self.state, y, self.C, self.R, self.gate)
         self._updated = True
         return self.state
 
     def predict(self, u: ArrayLike) -> EKFState:
         """Propagate to the next sample (14), (15) with the group fractions u held over t_s."""
-        with single_threaded_blas():
-            self.state = ekf_predict(self.model, self.state, u, self.Q)
+        self.state = ekf_predict(self.model, self.state, u, self.Q)
         return self.state
 
     def step(self, y: ArrayLike, u_prev: ArrayLike) -> EKFState:

@@ -61,7 +61,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from threadpoolctl import threadpool_limits
 
 from twin.config import FurnaceConfig
 from twin.dynamics import DiscreteDynamics
@@ -406,9 +405,8 @@ def solve_feedforward(
     FeedforwardError
         When IPOPT does not report success and ``best_effort`` is False.
     """
-    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threads only contend
-        return _solve_feedforward(model, theta0, t0, T_ref_fn, cfg, warm_start, parametrized, horizon,
-                                  interval, best_effort, max_iter, max_wall_s, ipopt_options)
+    return _solve_feedforward(model, theta0, t0, T_ref_fn, cfg, warm_start, parametrized, horizon,
+                              interval, best_effort, max_iter, max_wall_s, ipopt_options)
 
 
 def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_ref_fn: RefFn,

@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from threadpoolctl import threadpool_limits
 
 from twin.config import FurnaceConfig
 from twin.dynamics import DiscreteDynamics
@@ -195,8 +194,7 @@ def lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig
     BLAS runs single-threaded here: for ~106 x 106 products threads only contend on
     the shared cores (the DARE took 1.9 s multi-threaded vs 0.07 s on one thread).
     """
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _lqg_gains(model, plan, cfg, jacobian_every)
+    return _lqg_gains(model, plan, cfg, jacobian_every)
 
 
 def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig,

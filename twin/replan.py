@@ -22,7 +22,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from threadpoolctl import threadpool_limits
 
 from twin.config import FurnaceConfig
 from twin.feedforward import FeedforwardPlan, RefFn, solve_feedforward
@@ -84,10 +83,9 @@ def replan(
     """
     start = time.perf_counter()
     theta = np.asarray(theta_hat, float)
-    with threadpool_limits(limits=1, user_api="blas"):
-        plan = solve_feedforward(model, theta, t_now, reference_fn, cfg, warm_start=previous_plan,
-                                 parametrized=parametrized, best_effort=best_effort, horizon=horizon)
-        gains = lqg_gains(model, plan, cfg, jacobian_every=jacobian_every)
+    plan = solve_feedforward(model, theta, t_now, reference_fn, cfg, warm_start=previous_plan,
+                             parametrized=parametrized, best_effort=best_effort, horizon=horizon)
+    gains = lqg_gains(model, plan, cfg, jacobian_every=jacobian_every)
     log.info(
         "re-plan at t = %.1f s (%s): %s, %d iterations, OCP %.2f s, gains %.2f s, total %.2f s",
         t_now, "warm" if previous_plan is not None else "cold", plan.status, plan.iterations,

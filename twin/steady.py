@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -110,13 +109,6 @@ def uniform_scale(
     return _result(plant, s * d, T, T_mean)
 
 
-def _single_threaded_blas() -> Any:
-    """BLAS limited to one thread: the dense 442 x 442 solves only contend on shared cores."""
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def steady_powers(
     plant: Plant,
     T_mean: float = 1100.0,
@@ -137,8 +129,7 @@ def steady_powers(
     -------
     SteadyPowers; ``fillet_mean`` shows whether T_mean was reachable within the bounds.
     """
-    with _single_threaded_blas():
-        return _steady_powers(plant, T_mean, oscillation, u0)
+    return _steady_powers(plant, T_mean, oscillation, u0)
 
 
 def _steady_powers(
