@@ -14,9 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from backend.frames import json_safe
+from twin.loop import save_timeseries
 
 RECORDING = "recording.rrd"
 TIMESERIES = "timeseries.npz"
@@ -54,10 +53,5 @@ def write_json_atomic(path: Path, obj: Any) -> None:
 
 
 def write_npz_atomic(path: Path, arrays: Mapping[str, Any]) -> None:
-    """``np.savez`` to ``path`` atomically; strings (e.g. the scenario JSON) become 0-d arrays."""
-    tmp = path.with_name(path.name + ".tmp.npz")
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **{k: np.asarray(v) for k, v in arrays.items()})  # type: ignore[arg-type]
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    """The run's time series, atomically and uncompressed (it is rewritten every few seconds)."""
+    save_timeseries(path, arrays, compress=False)

@@ -37,7 +37,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -391,13 +391,20 @@ class ClosedLoop:
         return compute_metrics(self.timeseries())
 
 
-def save_timeseries(path: Any, ts: dict[str, Any]) -> None:
-    """Write a time series atomically (tmp file + rename) so a reader never sees half a file."""
+def save_timeseries(path: Any, ts: Mapping[str, Any], *, compress: bool = True) -> None:
+    """Write a time series atomically (tmp file, fsync, rename): a reader or a crash never sees half a file.
+
+    ``compress=False`` for frequent rewrites of a growing run (the backend's flush every 2 s).
+    """
     import os
     from pathlib import Path
 
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp.npz")
-    np.savez_compressed(tmp, **ts)
+    save = np.savez_compressed if compress else np.savez
+    with open(tmp, "wb") as fh:
+        save(fh, **{k: np.asarray(v) for k, v in ts.items()})  # type: ignore[arg-type]
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, p)
