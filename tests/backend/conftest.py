@@ -185,3 +185,15 @@ def browser():
         b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         yield b
         b.close()
+
+
+def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float = 120.0) -> dict:
+    """Poll ``GET /api/runs/{id}`` until the run reaches one of ``statuses`` (generous for loaded CI)."""
+    end = time.monotonic() + timeout
+    body: dict = {}
+    while time.monotonic() < end:
+        body = c.get(f"/api/runs/{run_id}").json()
+        if body["status"] in statuses:
+            return body
+        time.sleep(0.05)
+    raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fake_factory
+from conftest import fake_factory, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
@@ -22,16 +22,6 @@ from backend.settings import Settings
 def make_client(tmp_path: Path, cfg, factory=None, **settings) -> TestClient:
     s = Settings(data_dir=tmp_path / "data", **settings)
     return TestClient(create_app(s, cfg, loop_factory=factory or fake_factory()))
-
-
-def wait_status(c: TestClient, run_id: str, statuses: set[str], timeout: float = 20.0) -> dict:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        body = c.get(f"/api/runs/{run_id}").json()
-        if body["status"] in statuses:
-            return body
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} never reached {statuses}: {body['status']}")
 
 
 def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
@@ -21,17 +22,6 @@ from backend.settings import Settings
 SCENARIO = {"duration": 12.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
 REF_AT, NEW_REF = 3.0, {"setpoint": 950.0, "t_E": 2.0}
 OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
-
-
-def wait_status(c: TestClient, run_id: str, statuses: set[str], timeout: float = 120.0) -> dict:
-    end = time.monotonic() + timeout
-    body = {}
-    while time.monotonic() < end:
-        body = c.get(f"/api/runs/{run_id}").json()
-        if body["status"] in statuses:
-            return body
-        time.sleep(0.1)
-    raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")
 
 
 @pytest.fixture(scope="module")
