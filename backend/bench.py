@@ -21,9 +21,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import socket
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -33,38 +31,11 @@ import numpy as np
 from backend.app import create_app
 from backend.run_manager import DefaultLoopFactory
 from backend.settings import Settings
+from backend.threaded_server import ThreadedServer
 from twin.config import FurnaceConfig
 from twin.scenario import Scenario
 
 log = logging.getLogger(__name__)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class _Server:
-    def __init__(self, app: Any) -> None:
-        import uvicorn
-
-        self.port = _free_port()
-        self.server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=self.port, log_level="warning"))
-        self.thread = threading.Thread(target=self.server.run, name="bench-uvicorn", daemon=True)
-
-    def __enter__(self) -> _Server:
-        self.thread.start()
-        end = time.monotonic() + 60
-        while not self.server.started:
-            if time.monotonic() > end or not self.thread.is_alive():
-                raise RuntimeError("the benchmark server did not start")
-            time.sleep(0.02)
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.server.should_exit = True
-        self.thread.join(timeout=60)
 
 
 def _post(port: int, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -125,7 +96,7 @@ def stream_bench(cfg: FurnaceConfig, *, realtime_s: float = 10.0, max_speed_sim_
     factory.radiation(cfg)  # load the cached exchange factors before timing anything
     with tempfile.TemporaryDirectory(prefix="furnace-bench-") as tmp:
         settings = Settings(data_dir=Path(tmp), max_concurrent_runs=2, viser_port=0)  # type: ignore[call-arg]
-        with _Server(create_app(settings, cfg, loop_factory=factory)) as srv:
+        with ThreadedServer(create_app(settings, cfg, loop_factory=factory)) as srv:
             # 1) real time, five clients
             rt = Scenario.model_validate({"duration": realtime_s + 30.0, "speed": 1.0})
             run_id = _post(srv.port, "/api/runs", rt.model_dump(mode="json"))["id"]

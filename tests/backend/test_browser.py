@@ -9,10 +9,10 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import LiveServer, free_port
 
 from backend.app import create_app
 from backend.settings import Settings
+from backend.threaded_server import ThreadedServer, free_port
 
 pytestmark = pytest.mark.browser
 
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.browser
 @pytest.fixture(scope="module")
 def server(tmp_path_factory, small_cfg):
     s = Settings(data_dir=tmp_path_factory.mktemp("browser"), viser_port=free_port())
-    with LiveServer(create_app(s, small_cfg, viser=True), free_port()) as srv:
+    with ThreadedServer(create_app(s, small_cfg, viser=True), free_port()) as srv:
         srv.viser_url = f"http://127.0.0.1:{s.viser_port}/"
         yield srv
 

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import httpx
 import numpy as np
-from conftest import free_port
+
+from backend.threaded_server import free_port
 
 SERVE = (
     "import sys, logging; logging.basicConfig(level=logging.INFO);"

@@ -9,11 +9,12 @@ schemathesis pytest plugin does not load under pytest 9).
 from __future__ import annotations
 
 import schemathesis
-from conftest import LiveServer, fake_factory, free_port
+from conftest import fake_factory
 from hypothesis import HealthCheck, given, settings
 
 from backend.app import create_app
 from backend.settings import Settings
+from backend.threaded_server import ThreadedServer, free_port
 
 EXAMPLES = 6
 
@@ -22,7 +23,7 @@ def test_openapi_no_server_errors(tmp_path, small_cfg) -> None:
     s = Settings(data_dir=tmp_path / "data", max_duration_s=5.0, max_speed=50.0, max_concurrent_runs=2,
                  change_timeout_s=2.0)
     seen: list[tuple[str, int]] = []
-    with LiveServer(create_app(s, small_cfg, loop_factory=fake_factory()), free_port()) as srv:
+    with ThreadedServer(create_app(s, small_cfg, loop_factory=fake_factory()), free_port()) as srv:
         schema = schemathesis.openapi.from_url(f"{srv.url}/openapi.json")
         labels = []
         for result in schema.get_all_operations():
