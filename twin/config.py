@@ -303,6 +303,7 @@ class EKFWeights(_Section):
     r0: float = Field(gt=0)
     p0: float = Field(gt=0)
     innovation_gate: float = Field(gt=0)
+    jacobian_tolerance: float = Field(ge=0)
 
 
 class FeedforwardWeights(_Section):

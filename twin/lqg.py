@@ -271,13 +271,13 @@ def integrator_delta(u_applied: Array, u_unclipped: Array, k_int: Array, mean_er
     lamps are 15 % weaker than the model's, and the integrator then stayed frozen with
     a 10 K mean offset although the other groups had power to spare.
     """
-    if float(np.sum(u_applied)) > delta0:
+    if float(u_applied.sum()) > delta0:
         return 0.0
     if mean_error == 0.0:
         return 1.0  # nothing to integrate
     push = k_int * mean_error  # sign of the change of du from e_I += t_s e (t_s > 0)
     movable = ((push > 0) & (u_unclipped < 1.0)) | ((push < 0) & (u_unclipped > 0.0))
-    return 1.0 if bool(np.any(movable)) else 0.0
+    return 1.0 if movable.any() else 0.0
 
 
 def feedback_control(gains: Gains, plan: FeedforwardPlan, c_m: Array, delta0: float, j: int,
@@ -295,7 +295,7 @@ def feedback_control(gains: Gains, plan: FeedforwardPlan, c_m: Array, delta0: fl
     Kj = gains.at(j)
     du = Kj @ e
     u_raw = u_ff + du
-    u = np.clip(u_raw, 0.0, 1.0)
+    u = np.minimum(np.maximum(u_raw, 0.0), 1.0)  # sat, eq. (17) (np.clip costs twice as much)
     mean_err = float(c_m @ th) - T_ref  # eq. (19) with the requested T_ref,j
     delta = integrator_delta(u, u_raw, Kj[:, n], mean_err, delta0)
     new = IntegratorState(state.e_I + delta * plan.t_s * mean_err, frozen=delta == 0.0)
