@@ -163,3 +163,44 @@ def test_all_readings_beyond_the_gate_means_the_estimate_is_wrong(system, caplog
     good = EKFState(sy.x0.copy(), 25.0 * np.eye(len(sy.x0)))
     _, info1 = ekf_update(good, y1, sy.C, sy.R, gate=6.0)
     assert info1.used.tolist() == [False, True, True]
+
+
+def test_jacobian_is_reused_until_a_node_moves_more_than_the_tolerance(small_radiation) -> None:
+    """Phi (16) is cached by the Estimator: re-evaluated after a move > ekf.jacobian_tolerance or a model switch."""
+    from twin.config import small_config
+    from twin.ekf import Estimator
+    from twin.fe_model import discrete_model
+
+    cfg = small_config()
+    tol = cfg.ekf.jacobian_tolerance
+    model = discrete_model(cfg, small_radiation, None)
+    calls: list[np.ndarray] = []
+
+    class Counting:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+
+        def jac_theta(self, theta, u):
+            calls.append(np.array(theta))
+            return self.inner.jac_theta(theta, u)
+
+    counting = Counting(model)
+    est = Estimator(counting, cfg, 900.0)
+    u = np.full(model.m, 0.3)
+    theta0, P0 = est.state.theta.copy(), est.state.P.copy()
+
+    def predict_at(offset: float) -> None:
+        est.state = EKFState(theta0 + offset, P0)
+        est.predict(u)
+
+    predict_at(0.0)
+    predict_at(0.9 * tol)
+    assert len(calls) == 1  # within the tolerance: the cached Phi is used
+    predict_at(1.1 * tol)
+    assert len(calls) == 2 and np.allclose(calls[-1], theta0 + 1.1 * tol)
+    est.set_model(Counting(model))  # e.g. oscillation toggled: a new model object
+    predict_at(1.1 * tol)
+    assert len(calls) == 3

@@ -28,7 +28,7 @@ import tomllib
 from collections.abc import Mapping
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -304,6 +304,7 @@ class EKFWeights(_Section):
     p0: float = Field(gt=0)
     innovation_gate: float = Field(gt=0)
     jacobian_tolerance: float = Field(ge=0)
+    covariance_precision: Literal["single", "double"]
 
 
 class FeedforwardWeights(_Section):

@@ -76,14 +76,12 @@ class DiscreteModel:
     c: Array
     oscillation: OscillationSpec | None
     _mt_sparse: scipy.sparse.csr_matrix = field(init=False, repr=False)
-    _mt_csr: scipy.sparse.csr_matrix = field(init=False, repr=False)
     _A_T: Array = field(init=False, repr=False)
     _I_tsL: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         # per-sample EKF work (jac_theta) on precomputed pieces: M_theta has ~4 entries per row
         object.__setattr__(self, "_mt_sparse", scipy.sparse.csr_matrix(self.fe.M_theta.T))
-        object.__setattr__(self, "_mt_csr", scipy.sparse.csr_matrix(self.fe.M_theta))
         object.__setattr__(self, "_A_T", np.ascontiguousarray(self.A.T))
         object.__setattr__(self, "_I_tsL", np.eye(self.fe.n) + self.t_s * self.L)
 
@@ -110,7 +108,7 @@ class DiscreteModel:
     def rhs(self, theta: ArrayLike, u: ArrayLike) -> Array:
         """f(theta, u) = d theta / dt in K/s (eq. 11a)."""
         th = np.asarray(theta, float)
-        T = self._mt_csr @ th
+        T = self.fe.field_on_cells(th).ravel()  # M_theta theta
         return self.L @ th + self.A @ (T * T) ** 2 + self.B @ np.asarray(u, float) + self.c
 
     def step(self, theta: ArrayLike, u: ArrayLike) -> Array:
@@ -120,7 +118,7 @@ class DiscreteModel:
 
     def jac_theta(self, theta: ArrayLike, u: ArrayLike | None = None) -> Array:
         """dF/dtheta (n, n) = I + t_s (L + A diag(4 T^3) M_theta) (eq. 16); independent of u."""
-        T = self._mt_csr @ np.asarray(theta, float)
+        T = self.fe.field_on_cells(theta).ravel()  # M_theta theta
         scaled_T = self._A_T * (4.0 * self.t_s * T**3)[:, None]  # (N_s, n): t_s diag(4T^3) A^T
         rad_T = self._mt_sparse @ scaled_T  # t_s M_theta^T diag(4T^3) A^T = (t_s A diag(4T^3) M_theta)^T
         return self._I_tsL + rad_T.T
