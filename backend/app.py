@@ -25,7 +25,23 @@ from twin.config import FurnaceConfig, load_config
 
 log = logging.getLogger(__name__)
 
-ASSETS_DIR = Path(__file__).resolve().parent.parent / "frontend_assets"
+
+
+def assets_dir() -> Path:
+    """The dashboard's files: the installed ``frontend_assets`` package (package data), or, in an
+    editable install made before that package existed, the repository's ``frontend_assets`` folder."""
+    try:
+        from importlib.resources import files
+
+        path = Path(str(files("frontend_assets")))
+    except ModuleNotFoundError:
+        path = Path(__file__).resolve().parent.parent / "frontend_assets"
+    if not (path / "index.html").is_file():
+        log.error("the dashboard's files are missing from %s", path)
+    return path
+
+
+ASSETS_DIR = assets_dir()
 ASSET_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".svg": "image/svg+xml"}
 
 
@@ -70,7 +86,8 @@ def create_app(
             from backend.viser_view import FurnaceView
 
             manager.event_loop = asyncio.get_running_loop()
-            scene = FurnaceView(cfg, manager, host=settings.host, port=settings.viser_port)
+            # always loopback: the 3D view has no token check, so it must not be reachable from the network
+            scene = FurnaceView(cfg, manager, host="127.0.0.1", port=settings.viser_port)
             scene.start()
             app.state.viser_url = scene.url
         app.state.viser = scene
