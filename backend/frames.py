@@ -47,7 +47,8 @@ def _vector(a: Any, decimals: int = 4) -> list[float | None]:
     return [finite_or_none(round(float(v), decimals)) for v in np.asarray(a, dtype=float).ravel()]
 
 
-def _events(ev: Any) -> list[str]:
+def events_of(ev: Any) -> list[str]:
+    """A snapshot's ``events`` (None, one string or a sequence) as a list of strings."""
     if ev is None:
         return []
     if isinstance(ev, str):
@@ -72,7 +73,10 @@ def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     }
 
 
-def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str) -> dict[str, Any]:
+def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
+               events: list[str] | None = None) -> dict[str, Any]:
+    """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample
+    since the previous frame, so none is lost when samples are not streamed one by one)."""
     field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
     field = np.where(np.isfinite(field), field, np.nan)
     frame = scalar_values(s)
@@ -82,14 +86,15 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
         wall_time=wall_time,
         status=status,
         field=[[finite_or_none(v) for v in row] for row in field],
-        events=_events(s.events),
+        events=events_of(s.events) if events is None else list(events),
     )
     return frame
 
 
-def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str) -> str:
+def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
+               events: list[str] | None = None) -> str:
     """The frame as JSON text, serialised once and sent to every client."""
-    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status),
+    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events),
                       allow_nan=False, separators=(",", ":"))
 
 

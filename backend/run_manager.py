@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from backend.fanout import StreamHub
-from backend.frames import frame_json
+from backend.frames import events_of, frame_json
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, LoopLike, RunWorker
@@ -54,6 +54,7 @@ class DefaultLoopFactory:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
+        self._T_range: dict[str, tuple[float, float]] = {}
 
     def radiation(self, cfg: FurnaceConfig) -> Any:
         from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
@@ -63,6 +64,33 @@ class DefaultLoopFactory:
             if key not in self._radiation:
                 self._radiation[key] = radiation_model(cfg)
             return self._radiation[key]
+
+    def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
+        """Fillet means the furnace can hold (``twin.reference.reachable_range``), cached per furnace;
+        ``None`` if they cannot be computed (the run's own build then reports the problem)."""
+        key = cfg.digest()
+        if key in self._T_range:
+            return self._T_range[key]
+        try:
+            from twin.fe_model import discrete_model
+            from twin.reference import reachable_range
+
+            T_range = reachable_range(discrete_model(cfg, self.radiation(cfg), None), cfg)
+        except Exception:
+            log.exception("cannot compute the reachable temperature range; references are checked by the run")
+            return None
+        self._T_range[key] = T_range
+        return T_range
+
+    def check_reference(self, cfg: FurnaceConfig, reference: Reference) -> None:
+        """Raise ``ValueError`` (``twin.reference.ReferenceError``) if the loop would refuse ``reference``
+        at the start of a run, so ``POST /api/runs`` answers 422 instead of a run that ends in error."""
+        T_range = self.reachable_range(cfg)
+        if T_range is None:
+            return
+        from twin.reference import reference_trajectory
+
+        reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
         from twin.loop import ClosedLoop
@@ -121,6 +149,12 @@ class RunManager:
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id."""
         self.check_limits(scenario)
+        check = getattr(self.loop_factory, "check_reference", None)
+        if callable(check):  # off the event loop: the first call may load the radiation model
+            try:
+                await asyncio.to_thread(check, self.cfg, scenario.reference)
+            except ValueError as exc:
+                raise LimitExceeded(f"reference: {exc}") from None
         running = sum(1 for a in self.active.values() if a.status in ("queued", "starting", "running"))
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -147,13 +181,13 @@ class RunManager:
         run.status = status
         self.repo.set_status(run_id, status, error=error)
 
-    def _publish(self, run_id: str, run: ActiveRun) -> None:
+    def _publish(self, run_id: str, run: ActiveRun, events: list[str] | None = None) -> None:
         w = run.worker
         if w.latest is None or w.seq == run.published_seq:
             return
         run.published_seq = w.seq
         run.hub.publish(frame_json(w.latest, run_id=run_id, seq=w.seq, wall_time=w.latest_wall,
-                                   status=run.status))
+                                   status=run.status, events=events))
 
     async def _drive(self, run_id: str, run: ActiveRun) -> None:
         """The run's task: build, step at speed, publish, finalise."""
@@ -164,6 +198,8 @@ class RunManager:
         # skipped even when two of them fall into one advance() call (a late worker catching up)
         every_sample = w.speed is not None and w.speed / self.cfg.sampling.t_s <= self.settings.stream_max_hz
         last_pub = -1e9
+        # events of samples that are not streamed one by one ride on the next frame: none is lost
+        unsent_events: list[str] = []
         final = "finished"
         error: str | None = None
         try:
@@ -177,9 +213,13 @@ class RunManager:
                     for snap, seq, wall in adv.samples:
                         run.hub.publish(frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=run.status))
                         run.published_seq = seq
+                else:
+                    for snap, _, _ in adv.samples:
+                        unsent_events.extend(events_of(snap.events))
                 pending = w.seq != run.published_seq
                 if pending and now - last_pub >= min_interval:
-                    self._publish(run_id, run)
+                    self._publish(run_id, run, unsent_events)
+                    unsent_events = []
                     last_pub, pending = now, False
                 if adv.finished:
                     break
@@ -216,7 +256,7 @@ class RunManager:
             self.repo.set_status(run_id, final, error=error)
             if w.latest is not None:
                 run.hub.publish(frame_json(w.latest, run_id=run_id, seq=w.seq, wall_time=w.latest_wall,
-                                           status=final))
+                                           status=final, events=unsent_events))
             run.hub.close()
             if run.hub.latest is not None:
                 self._last_frames[run_id] = run.hub.latest

@@ -30,6 +30,8 @@ class FakeLoop:
 
     eta(t) = A sin(2 pi t / period) when oscillation is on.  ``step_cost_s`` burns wall time
     per step to imitate a slow loop; ``replan_s`` sleeps inside set_reference/set_oscillation.
+    A change is reported in the next snapshot's ``events``, like the real loop's.  Points of a
+    reference changed at run time t0 count from t0 (``ClosedLoop.set_reference``).
     """
 
     cfg: Any
@@ -41,6 +43,9 @@ class FakeLoop:
     reference: Any = None
     oscillation: Any = None
     rows: list[Snapshot] = field(default_factory=list)
+    ref_t0: float = 0.0
+    T_start: float = 300.0
+    events: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.reference = self.scenario.reference
@@ -51,10 +56,13 @@ class FakeLoop:
         return self.t >= self.scenario.duration - 1e-9
 
     def T_ref(self, t: float) -> float:
-        r = self.reference
+        r, tr = self.reference, t - self.ref_t0
         if hasattr(r, "points"):
-            return float(np.interp(t, [p[0] for p in r.points], [p[1] for p in r.points]))
-        return 300.0 + (r.setpoint - 300.0) * min(t / r.t_E, 1.0)
+            ts, Ts = [p[0] for p in r.points], [p[1] for p in r.points]
+            if ts[0] > 0:
+                ts, Ts = [0.0, *ts], [self.T_start, *Ts]
+            return float(np.interp(tr, ts, Ts))
+        return self.T_start + (r.setpoint - self.T_start) * min(tr / r.t_E, 1.0)
 
     def step(self) -> Snapshot:
         if self.step_cost_s:
@@ -73,20 +81,22 @@ class FakeLoop:
             j=len(self.rows), t=self.t, eta=eta, T_ref=ref, T_mean_hat=self.T,
             field_hat=field_, field_true=field_ + 1.0,
             tc=np.full(4, self.T + 0.5), tc_hat=np.full(4, self.T), u=np.full(6, 0.5), u_ff=np.full(6, 0.4),
-            inhomogeneity=5.0, true_mean=self.T + 1.0, true_inhomogeneity=6.0,
+            inhomogeneity=5.0, true_mean=self.T + 1.0, true_inhomogeneity=6.0, events=tuple(self.events),
         )
+        self.events.clear()
         self.rows.append(snap)
         return snap
 
     def set_reference(self, ref: Any) -> None:
         time.sleep(self.replan_s)
-        if getattr(ref, "setpoint", 0) > 1250.0:
-            raise ValueError("setpoint unreachable in the fake furnace")
-        self.reference = ref
+        check_fake_reference(self.cfg, ref)
+        self.reference, self.ref_t0, self.T_start = ref, self.t, self.T_ref(self.t)
+        self.events.append(f"reference changed at t = {self.t:.1f} s")
 
     def set_oscillation(self, spec: Any) -> None:
         time.sleep(self.replan_s)
         self.oscillation = spec
+        self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {self.t:.1f} s")
 
     def timeseries(self) -> dict[str, Any]:
         r = self.rows
@@ -103,11 +113,28 @@ class FakeLoop:
                 "mean_error_steady_max": float("nan")}
 
 
-def fake_factory(step_cost_s: float = 0.0, replan_s: float = 0.0):
-    def make(cfg: Any, scenario: Any) -> FakeLoop:
-        return FakeLoop(cfg, scenario, step_cost_s=step_cost_s, replan_s=replan_s)
+def check_fake_reference(cfg: Any, ref: Any) -> None:
+    """The fake furnace holds at most 1250 K (the real loop's ``reachable_range``)."""
+    temps = [p[1] for p in ref.points] if hasattr(ref, "points") else [ref.setpoint]
+    if max(temps) > 1250.0:
+        raise ValueError(f"{max(temps):.1f} K is unreachable in the fake furnace (at most 1250 K)")
 
-    return make
+
+class FakeFactory:
+    """Makes FakeLoops; like ``DefaultLoopFactory`` it checks a reference before a run starts."""
+
+    def __init__(self, step_cost_s: float = 0.0, replan_s: float = 0.0) -> None:
+        self.step_cost_s, self.replan_s = step_cost_s, replan_s
+
+    def __call__(self, cfg: Any, scenario: Any) -> FakeLoop:
+        return FakeLoop(cfg, scenario, step_cost_s=self.step_cost_s, replan_s=self.replan_s)
+
+    def check_reference(self, cfg: Any, ref: Any) -> None:
+        check_fake_reference(cfg, ref)
+
+
+def fake_factory(step_cost_s: float = 0.0, replan_s: float = 0.0) -> FakeFactory:
+    return FakeFactory(step_cost_s, replan_s)
 
 
 @pytest.fixture(scope="session")

@@ -213,3 +213,118 @@ def test_real_time_factor_paces_the_samples(tmp_path, small_cfg) -> None:
         # at 10 samples per simulated second x 2 = 20 samples/s, frames are capped at 20/s
         rate = (len(live) - 1) / wall
         assert 15.0 < rate <= 21.0, rate
+
+
+def _frames(c: TestClient, run_id: str, on_frame=None) -> list[dict]:
+    """Every frame of the run's stream until it closes; ``on_frame(frame)`` may act on the run."""
+    frames = []
+    with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+        while True:
+            try:
+                f = json.loads(ws.receive_text())
+            except Exception:
+                break
+            frames.append(f)
+            if on_frame is not None:
+                on_frame(f)
+    return frames
+
+
+def test_points_reference_at_start_and_live(tmp_path, small_cfg) -> None:
+    """{"points": [[t, T], ...]} is a reference at the start (times from 0) and as a live change
+    (times from the sample it applies at); the frames' T_ref follows the points."""
+    with make_client(tmp_path, small_cfg) as c:
+        start = {"points": [[0.0, 300.0], [2.0, 700.0], [3.0, 800.0]]}
+        r = c.post("/api/runs", json={"duration": 8.0, "speed": 2.0, "reference": start})  # every sample streamed
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
+        assert c.get(f"/api/runs/{run_id}").json()["scenario"]["reference"] == start
+        replies = []
+
+        def change(f: dict) -> None:
+            if not replies and f["t"] >= 4.0:
+                replies.append(c.put(f"/api/runs/{run_id}/reference", json={"points": [[1.0, 900.0], [2.0, 950.0]]}))
+
+        frames = _frames(c, run_id, change)
+        reply = replies[0]
+        assert reply.status_code == 200, reply.text
+        assert reply.json()["status"] == "applied" and reply.json()["body"] == {"points": [[1.0, 900.0], [2.0, 950.0]]}
+        t0 = reply.json()["applied_t"]
+        by_t = {round(f["t"], 1): f["T_ref"] for f in frames}
+        assert by_t[2.0] == pytest.approx(700.0) and by_t[3.0] == pytest.approx(800.0)
+        # the new points count from the sample the change applied at: 900 K one second later, then 950 K
+        assert by_t[round(t0 + 1.0, 1)] == pytest.approx(900.0)
+        assert frames[-1]["T_ref"] == pytest.approx(950.0)
+        body = wait_status(c, run_id, {"finished"})
+        assert body["changes"][0]["body"] == {"points": [[1.0, 900.0], [2.0, 950.0]]}
+        assert body["changes"][0]["status"] == "applied"
+
+
+def test_bad_points_get_422_that_says_why(tmp_path, small_cfg) -> None:
+    with make_client(tmp_path, small_cfg) as c:
+        bad = [
+            ({"points": [[0.0, 900.0], [0.0, 1000.0]]}, "strictly increasing"),
+            ({"points": [[5.0, 900.0], [3.0, 1000.0]]}, "strictly increasing"),
+            ({"points": [[-1.0, 900.0]]}, ">= 0"),
+            ({"points": [[10.0, 2000.0]]}, "2000"),
+            ({"points": []}, "at least 1"),
+            ({"points": [[1.0, 2.0, 3.0]]}, "at most 2"),
+            ({"points": [[1.0, "hot"]]}, "valid number"),
+            ({"points": [[10.0, 1280.0]]}, "unreachable"),  # the (fake) furnace holds at most 1250 K
+        ]
+        for ref, why in bad:
+            r = c.post("/api/runs", json={"duration": 5.0, "reference": ref})
+            assert r.status_code == 422, (ref, r.text)
+            assert why in r.text, (ref, r.text)
+        assert c.get("/api/runs").json() == []  # nothing was started
+        run_id = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0}).json()["id"]
+        wait_status(c, run_id, {"running"})
+        for ref, why in bad:
+            r = c.put(f"/api/runs/{run_id}/reference", json=ref)
+            assert r.status_code == 422, (ref, r.text)
+            assert why in r.text, (ref, r.text)
+        body = c.get(f"/api/runs/{run_id}").json()
+        assert body["status"] == "running"  # a refused reference never ends the run
+        # only the unreachable one reached the loop; it is kept as a rejected change
+        assert [(ch["status"], ch["body"]) for ch in body["changes"]] == [("rejected", {"points": [[10.0, 1280.0]]})]
+        c.post(f"/api/runs/{run_id}/stop")
+
+
+def test_points_need_the_token_too(tmp_path, small_cfg) -> None:
+    ref = {"points": [[5.0, 900.0]]}
+    with make_client(tmp_path, small_cfg, api_token="s3cret") as c:
+        r = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0, "reference": ref})
+        assert r.status_code == 401 and "token" in r.json()["detail"]
+        assert r.headers["www-authenticate"] == "Bearer"
+        ok = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0, "reference": ref},
+                    headers={"X-API-Token": "s3cret"})
+        assert ok.status_code == 201, ok.text
+        run_id = ok.json()["id"]
+        wait_status(c, run_id, {"running"})
+        assert c.put(f"/api/runs/{run_id}/reference", json=ref).status_code == 401
+        assert c.put(f"/api/runs/{run_id}/reference", json=ref, headers={"X-API-Token": "wrong"}).status_code == 401
+        r = c.put(f"/api/runs/{run_id}/reference", json=ref, headers={"X-API-Token": "s3cret"})
+        assert r.status_code == 200 and r.json()["status"] == "applied"
+        assert c.post(f"/api/runs/{run_id}/stop", headers={"Authorization": "Bearer s3cret"}).status_code == 202
+
+
+def test_events_reach_the_stream_at_max_speed(tmp_path, small_cfg) -> None:
+    """At speed max most samples are not streamed (frames are capped); the events of skipped samples
+    ride on the next frame, so a change's event arrives exactly once."""
+    with make_client(tmp_path, small_cfg, stream_max_hz=5.0) as c:
+        run_id = c.post("/api/runs", json={"duration": 3000.0, "speed": "max"}).json()["id"]
+        replies = []
+
+        def change(f: dict) -> None:
+            if not replies and f["t"] > 1.0:
+                replies.append(c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": True, "period": 5.0}))
+            elif replies and len(replies) == 1 and f["t"] > replies[0].json()["applied_t"] + 50.0:
+                replies.append(c.post(f"/api/runs/{run_id}/stop"))
+
+        frames = _frames(c, run_id, change)
+        assert replies[0].status_code == 200, replies[0].text
+        seqs = [f["seq"] for f in frames]
+        assert max(b - a for a, b in zip(seqs, seqs[1:], strict=False)) > 10  # samples were skipped
+        events = [e for f in frames for e in f["events"]]
+        assert [e for e in events if e.startswith("oscillation on")] == [
+            f"oscillation on at t = {replies[0].json()['applied_t']:.1f} s"]
