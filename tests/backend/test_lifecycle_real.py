@@ -142,3 +142,14 @@ def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
     verify = subprocess.run([str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True, env=env,
                             timeout=120)
     assert verify.returncode == 0, verify.stderr[-2000:]
+
+
+def test_unreachable_reference_is_refused_before_a_run_starts(tmp_path, small_cfg) -> None:
+    """With the real loop factory, POST checks the reference against the furnace's reachable range:
+    a 422 that says why, instead of a run that would end in error while building its loop."""
+    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg)) as c:
+        # 260 K is colder than every surface around the specimen (pydantic allows 250 K and up)
+        r = c.post("/api/runs", json={"reference": {"points": [[5.0, 900.0], [10.0, 260.0]]}})
+        assert r.status_code == 422, r.text
+        assert "unreachable" in r.json()["detail"] and "260.0 K" in r.json()["detail"]
+        assert c.get("/api/runs").json() == []
