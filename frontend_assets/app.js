@@ -5,36 +5,166 @@ const GROUP_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8
 const TC_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"];
 const RENDER_MS = 250; // charts redraw at most 4 times per second; frames arrive up to 20/s
 const MAX_POINTS = 3000; // per trace, older samples are thinned
+const MAX_EVENTS = 200; // entries kept in the event log (newest at top)
+const TOKEN_KEY = "furnace-twin-token"; // sessionStorage: this tab only, never in the URL
+const T_MIN = 250, T_MAX = 1300, T_END_MAX = 3600; // what the server accepts for reference points (twin/scenario.py)
 
 const state = {
   furnace: null, health: null, runId: null, run: null, ws: null, frames: 0,
   series: null, lastFrame: null, dirty: false, oscEnabled: false, tc4: [0.5, 0.5],
+  eventSeq: -1, lastStatus: null, nEvents: 0, stopping: null,
 };
 
 const $ = (id) => document.getElementById(id);
 const pct = (v, d = 2) => (v === null || v === undefined || Number.isNaN(v) ? "–" : (100 * v).toFixed(d));
 const fmt = (v, d = 1) => (v === null || v === undefined || Number.isNaN(v) ? "–" : Number(v).toFixed(d));
 
-function token() { return localStorage.getItem("furnace-twin-token") || ""; }
+function token() { return sessionStorage.getItem(TOKEN_KEY) || ""; }
+
+// One validation error of FastAPI / pydantic as a sentence: "reference › point 2 › temperature: ..."
+function formatValidation(e) {
+  const loc = e.loc || [];
+  const parts = [];
+  for (let k = 0; k < loc.length; k++) {
+    const p = loc[k];
+    if (k === 0 && p === "body") continue;
+    if (p === "transition" || p === parts[parts.length - 1]) continue; // tags of the reference union
+    if (typeof p === "number" && parts[parts.length - 1] === "points") {
+      parts.push(`point ${p + 1}`);
+      if (loc[k + 1] === 0 || loc[k + 1] === 1) { parts.push(loc[k + 1] === 0 ? "time" : "temperature"); k += 1; }
+      continue;
+    }
+    parts.push(String(p));
+  }
+  const msg = String(e.msg || "invalid").replace(/^Value error, /, "");
+  return parts.length ? `${parts.join(" › ")}: ${msg}` : msg;
+}
+
+function formatDetail(detail) {
+  if (typeof detail === "string") return detail;
+  if (Array.isArray(detail)) return detail.map(formatValidation).join("; ");
+  return JSON.stringify(detail);
+}
 
 async function api(method, path, body) {
   const headers = { "Content-Type": "application/json" };
-  if (token()) headers["X-API-Token"] = token();
-  const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  if (method !== "GET" && token()) headers["X-API-Token"] = token();
+  let r;
+  try {
+    r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  } catch (e) { throw new Error(`the server did not answer (${e.message})`); }
   let data = null;
   try { data = await r.json(); } catch (e) { data = null; }
   if (!r.ok) {
-    let msg = data && data.detail !== undefined ? data.detail : r.statusText;
-    if (Array.isArray(msg)) msg = msg.map((e) => `${(e.loc || []).slice(1).join(".")}: ${e.msg}`).join("; ");
-    throw new Error(`${r.status}: ${msg}`);
+    const detail = data && data.detail !== undefined ? formatDetail(data.detail) : r.statusText;
+    let text = `${r.status}: ${detail}`;
+    if (r.status === 401) {
+      $("token-box").hidden = false;
+      $("token").classList.add("need");
+      text = token() ? "401: the API token is wrong: correct it in the \u201cAPI token\u201d field at the top right"
+        : "401: this server needs its API token: enter it in the \u201cAPI token\u201d field at the top right";
+    }
+    const err = new Error(text);
+    err.status = r.status;
+    throw err;
   }
   return data;
 }
 
-function showMsg(text, isErr = false) {
-  const el = $("ctl-msg");
+// ---------------------------------------------------------------- reference points
+// "time, temperature" per line (comma, semicolon, tab or spaces between; # starts a comment).
+// Returns [[t, T], ...] or throws an Error that names every bad line.
+function parsePoints(text) {
+  const points = [], problems = [];
+  let prevT = null;
+  text.split(/\r?\n/).forEach((raw, k) => {
+    const line = raw.replace(/#.*$/, "").trim();
+    if (!line) return;
+    const where = `line ${k + 1}`;
+    const parts = line.split(/[\s,;]+/).filter(Boolean);
+    const nums = parts.map(Number);
+    if (parts.length !== 2 || nums.some((v) => !Number.isFinite(v))) {
+      problems.push(`${where}: \u201c${line}\u201d is not \u201ctime, temperature\u201d (two numbers, e.g. \u201c60, 900\u201d)`);
+      return;
+    }
+    const [t, T] = nums;
+    if (t < 0) problems.push(`${where}: time ${t} s is negative`);
+    else if (t > T_END_MAX) problems.push(`${where}: time ${t} s is beyond ${T_END_MAX} s`);
+    else if (prevT !== null && t <= prevT) problems.push(`${where}: time ${t} s is not after ${prevT} s (times must increase)`);
+    if (T < T_MIN || T > T_MAX) problems.push(`${where}: ${T} K is outside ${T_MIN}\u2026${T_MAX} K`);
+    prevT = t;
+    points.push([t, T]);
+  });
+  if (!points.length && !problems.length) problems.push("enter at least one \u201ctime, temperature\u201d line");
+  if (problems.length) {
+    const shown = problems.slice(0, 3).join("; ");
+    throw new Error(`reference points: ${shown}${problems.length > 3 ? ` (and ${problems.length - 3} more)` : ""}`);
+  }
+  return points;
+}
+
+function describeReference(ref) {
+  if (!ref) return "–";
+  if (ref.points) {
+    const pts = ref.points.map(([t, T]) => `${fmt(t, 0)} s \u2192 ${fmt(T, 0)} K`);
+    return `points ${pts.slice(0, 4).join(", ")}${pts.length > 4 ? `, \u2026 (${pts.length})` : ""}`;
+  }
+  return `${ref.setpoint} K in ${ref.t_E} s`;
+}
+
+function refMode(name) {
+  const el = document.querySelector(`input[name="${name}"]:checked`);
+  return el ? el.value : "transition";
+}
+
+function showRefMode(name) {
+  const mode = refMode(name);
+  for (const el of document.querySelectorAll(`[data-${name}]`)) el.hidden = el.dataset[camel(name)] !== mode;
+}
+const camel = (s) => s.replace(/-([a-z])/g, (_, c) => c.toUpperCase());
+
+// The message line answers what the user did (a start, a PUT, a stop); the event log holds what the run reports.
+function showMsg(text, isErr = false, id = "ctl-msg") {
+  const el = $(id);
   el.textContent = text;
   el.className = isErr ? "msg err" : "msg";
+}
+
+function clearEvents() {
+  $("event-log").innerHTML = '<li class="empty muted">events of the shown run appear here</li>';
+  state.nEvents = 0;
+  $("event-count").textContent = "";
+}
+
+function addEvent(t, text, kind = "") {
+  const log = $("event-log");
+  const empty = log.querySelector("li.empty");
+  if (empty) empty.remove();
+  const li = document.createElement("li");
+  if (kind) li.className = kind;
+  const ts = document.createElement("span");
+  ts.className = "t";
+  ts.textContent = t === null || t === undefined ? "" : `t = ${fmt(t)} s`;
+  li.append(ts, document.createTextNode(` ${text}`));
+  log.prepend(li); // newest at top
+  while (log.children.length > MAX_EVENTS) log.lastElementChild.remove();
+  state.nEvents += 1;
+  $("event-count").textContent = `· ${state.nEvents}`;
+}
+
+function noteStatus(status, t) { // a status change of the shown run goes to the event log once
+  if (!status || status === state.lastStatus) return;
+  const first = state.lastStatus === null;
+  state.lastStatus = status;
+  if (first && !["queued", "starting", "running"].includes(status)) return;
+  const run = state.run;
+  const kind = status === "error" ? "err" : (status === "interrupted" ? "warn" : "");
+  addEvent(t, `run ${status}${status === "error" && run && run.error ? `: ${run.error}` : ""}`, kind);
+  if (state.stopping === state.runId && !["queued", "starting", "running"].includes(status)) { // the Stop reply, completed
+    showMsg(`run ${state.runId} ${status}${t !== null && t !== undefined ? ` at t = ${fmt(t)} s` : ""}; its data is kept`);
+    state.stopping = null;
+  }
+  if (status === "error" && run && run.error) showMsg(`run ${run.id} failed: ${run.error}`, true);
 }
 
 // ---------------------------------------------------------------- series buffer
@@ -115,14 +245,28 @@ function heatmapFigure() {
   };
 }
 
+// The user's reference points of the shown run (start and applied live changes) in run time.
+function referenceMarkers(run) {
+  const x = [], y = [];
+  if (!run) return { x, y };
+  const add = (ref, t0) => { if (ref && ref.points) for (const [t, T] of ref.points) { x.push(t0 + t); y.push(T); } };
+  add(run.scenario.reference, 0);
+  for (const ch of run.changes || []) if (ch.kind === "reference" && ch.status === "applied") add(ch.body, ch.applied_t || 0);
+  return { x, y };
+}
+
 function lineFigures() {
   const s = state.series || emptySeries();
   const groups = state.furnace.groups;
+  const pts = referenceMarkers(state.run);
   return {
     "mean-plot": {
       data: [
         { x: s.t, y: s.T_ref, name: "T_ref", line: { color: "#111", dash: "dash", width: 1.6 } },
         { x: s.t, y: s.T_mean_hat, name: "fillet mean (est.)", line: { color: "#d62728", width: 1.8 } },
+        { x: pts.x, y: pts.y, name: "ref. points", mode: "markers", showlegend: pts.x.length > 0,
+          marker: { symbol: "circle-open", size: 8, color: "#111", line: { width: 1.6 } },
+          hovertemplate: "%{x:.1f} s, %{y:.0f} K<extra>reference point</extra>" },
       ],
       layout: baseLayout("Fillet mean vs reference", "T (K)"),
     },
@@ -191,7 +335,7 @@ function renderRunInfo(run) {
   if (!run) return;
   const m = run.metrics || {};
   const sc = run.scenario;
-  const ref = sc.reference.points ? `${sc.reference.points.length} points` : `${sc.reference.setpoint} K in ${sc.reference.t_E} s`;
+  const ref = describeReference(sc.reference);
   const rows = Object.entries(m).map(([k, v]) => `<tr><td>${k}</td><td class="num">${pct(v)} %</td></tr>`).join("");
   const files = run.files || {};
   const links = [
@@ -206,14 +350,18 @@ function renderRunInfo(run) {
     ${rows ? `<div class="muted">metrics, relative to the setpoint</div><table>${rows}</table>` : `<div class="muted">metrics when the run ends</div>`}`;
 }
 
-async function refreshRun() {
+async function refreshRun(quiet = false) {
   if (!state.runId) return;
   try {
     const run = await api("GET", `/api/runs/${state.runId}`);
+    if (run.id !== state.runId) return; // another run was picked meanwhile
+    const before = state.run && state.run.id === run.id ? (state.run.changes || []).length : -1;
     state.run = run;
     badge(run.status);
     setControls(run);
     renderRunInfo(run);
+    if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
+    if ((run.changes || []).length !== before) state.dirty = true; // reference markers
   } catch (e) { /* transient */ }
 }
 
@@ -229,8 +377,12 @@ function connectStream(runId) {
     state.frames += 1;
     pushFrame(f);
     $("run-clock").textContent = `t = ${fmt(f.t)} s`;
-    if (f.events && f.events.length) showMsg(`t = ${fmt(f.t)} s: ${f.events.join("; ")}`);
+    if (f.seq === undefined || f.seq > state.eventSeq) { // the last frame of a run may repeat its sample
+      for (const ev of f.events || []) addEvent(f.t, ev, /fail|error|reject/i.test(ev) ? "warn" : "");
+      if (f.seq !== undefined) state.eventSeq = f.seq;
+    }
     if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
+    if (f.status && !["queued", "starting", "running"].includes(f.status)) noteStatus(f.status, f.t);
     state.dirty = true;
   };
   ws.onclose = () => { if (state.ws === ws) { state.ws = null; refreshRun(); refreshHistory(); } };
@@ -241,9 +393,19 @@ async function selectRun(runId) {
   state.series = emptySeries();
   state.lastFrame = null;
   state.frames = 0;
-  await refreshRun();
+  state.run = null;
+  state.eventSeq = -1;
+  state.lastStatus = null;
+  clearEvents();
+  await refreshRun(true);
   const run = state.run;
-  if (!run) return;
+  if (!run || run.id !== runId) return;
+  for (const ch of run.changes || []) { // what was changed before this page showed the run
+    const what = ch.kind === "reference" ? `reference ${describeReference(ch.body)}` : `oscillation ${ch.body.enabled ? "on" : "off"}`;
+    addEvent(ch.applied_t, `${what}: ${ch.status}${ch.message ? ` (${ch.message})` : ""}`, ch.status === "applied" ? "" : "warn");
+  }
+  addEvent(run.latest ? run.latest.t : null, `run ${run.status}${run.error ? `: ${run.error}` : ""}`,
+    run.status === "error" ? "err" : (run.status === "interrupted" ? "warn" : ""));
   state.tc4 = run.scenario.tc4;
   if (["queued", "starting", "running"].includes(run.status)) {
     connectStream(runId);
@@ -287,8 +449,10 @@ function scenarioFromForm(form) {
   const v = (name) => form.elements[name].value;
   const num = (name) => Number(v(name));
   const speedText = v("speed").trim();
+  const reference = refMode("refmode") === "points" ? { points: parsePoints(v("points")) }
+    : { setpoint: num("setpoint"), t_E: num("t_E") };
   return {
-    reference: { setpoint: num("setpoint"), t_E: num("t_E") },
+    reference,
     duration: num("duration"),
     oscillation: { enabled: form.elements.osc.checked, amplitude: num("amplitude"), period: num("period") },
     tc4: [num("tc4x"), num("tc4y")],
@@ -302,24 +466,46 @@ function scenarioFromForm(form) {
 $("start-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   const btn = $("start-btn");
+  const area = ev.target.elements.points;
   btn.disabled = true;
+  area.classList.remove("invalid");
+  let scenario = null;
   try {
-    const created = await api("POST", "/api/runs", scenarioFromForm(ev.target));
-    showMsg(`run ${created.id} started`);
+    scenario = scenarioFromForm(ev.target);
+    showMsg("starting…", false, "start-msg");
+    const created = await api("POST", "/api/runs", scenario);
+    showMsg(`run ${created.id} started: reference ${describeReference(scenario.reference)}`, false, "start-msg");
     await selectRun(created.id);
     refreshHistory();
-  } catch (e) { showMsg(e.message, true); }
+  } catch (e) {
+    if (!scenario || /reference/.test(e.message)) area.classList.toggle("invalid", refMode("refmode") === "points");
+    showMsg(e.message, true, "start-msg");
+  }
   btn.disabled = false;
 });
 
 $("ref-btn").addEventListener("click", async () => {
-  const body = { setpoint: Number($("new-setpoint").value), t_E: Number($("new-tE").value) };
-  showMsg("re-planning…");
+  let body;
+  const area = $("new-points");
+  area.classList.remove("invalid");
+  try {
+    body = refMode("live-refmode") === "points" ? { points: parsePoints(area.value) }
+      : { setpoint: Number($("new-setpoint").value), t_E: Number($("new-tE").value) };
+  } catch (e) { area.classList.add("invalid"); showMsg(e.message, true); return; }
+  const what = body.points ? `reference ${describeReference(body)} (times from now)` : `reference ${body.setpoint} K over ${body.t_E} s`;
+  const btn = $("ref-btn");
+  btn.disabled = true;
+  showMsg(`${what}: re-planning…`);
   try {
     const r = await api("PUT", `/api/runs/${state.runId}/reference`, body);
-    showMsg(`reference ${body.setpoint} K over ${body.t_E} s: ${r.status}${r.applied_t !== null ? ` at t = ${fmt(r.applied_t)} s` : ""}`);
+    const at = r.applied_t !== null && r.applied_t !== undefined ? ` at t = ${fmt(r.applied_t)} s` : "";
+    showMsg(r.status === "pending" ? `${what}: still re-planning; it applies when ready` : `${what}: ${r.status}${at}`);
     refreshRun();
-  } catch (e) { showMsg(e.message, true); }
+  } catch (e) {
+    if (body.points && e.status === 422) area.classList.add("invalid");
+    showMsg(`${what} refused: ${e.message}`, true);
+  }
+  btn.disabled = !(state.run && ["queued", "starting", "running"].includes(state.run.status));
 });
 
 $("osc-btn").addEventListener("click", async () => {
@@ -337,11 +523,24 @@ $("osc-btn").addEventListener("click", async () => {
 });
 
 $("stop-btn").addEventListener("click", async () => {
-  try { await api("POST", `/api/runs/${state.runId}/stop`); showMsg("stopping…"); } catch (e) { showMsg(e.message, true); }
+  try {
+    await api("POST", `/api/runs/${state.runId}/stop`);
+    state.stopping = state.runId;
+    showMsg(`stopping run ${state.runId}…`);
+  } catch (e) { showMsg(e.message, true); }
   setTimeout(() => { refreshRun(); refreshHistory(); }, 800);
 });
 
-$("token").addEventListener("change", (ev) => localStorage.setItem("furnace-twin-token", ev.target.value));
+$("token").addEventListener("input", (ev) => {
+  const v = ev.target.value.trim();
+  if (v) sessionStorage.setItem(TOKEN_KEY, v); else sessionStorage.removeItem(TOKEN_KEY);
+  ev.target.classList.remove("need");
+});
+for (const name of ["refmode", "live-refmode"]) {
+  for (const el of document.querySelectorAll(`input[name="${name}"]`)) el.addEventListener("change", () => showRefMode(name));
+  showRefMode(name);
+}
+localStorage.removeItem(TOKEN_KEY); // an older dashboard kept the token there; it now lives only in this tab
 
 // ---------------------------------------------------------------- start-up
 async function init() {
