@@ -1,4 +1,4 @@
-"""The viser 3D view: the furnace as it is, following one run live.
+"""The viser 3D view: the furnace as it is, following one run live or showing a finished one.
 
 The specimen plate is coloured per vertex by the estimated field and moves with eta between
 the two lamp arrays; each lamp is coloured by its group's power (dark = off, bright yellow =
@@ -6,8 +6,13 @@ u_max); the gold reflectors, the holders (moving with the plate), the quartz win
 optionally, the housing are drawn from ``twin.geometry.display_meshes``.  TC markers show
 their readings.  The GUI mirrors the REST controls: start, stop, oscillation, setpoint.
 
-The view runs on viser's own thread and port (host 127.0.0.1 by default); a daemon thread
-reads the followed run's latest snapshot at <= ``UPDATE_HZ`` and updates the scene, so it
+The "Run" dropdown picks what the scene shows: "newest running" (the default) follows the
+newest active run; a running run is followed live; a finished (stopped, interrupted, ...) run
+shows its last estimated field from its ``timeseries.npz``.  The live controls act on the shown
+run only while it runs.
+
+The view runs on viser's own thread and port (always 127.0.0.1: it has no token check); a daemon
+thread reads the shown run's latest snapshot at <= ``UPDATE_HZ`` and updates the scene, so it
 never slows a run.  GUI callbacks hand their work to the server's event loop
 (``asyncio.run_coroutine_threadsafe``), the same code paths as the REST endpoints.
 """
@@ -18,6 +23,8 @@ import asyncio
 import logging
 import threading
 import time
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,6 +32,7 @@ import trimesh
 import viser
 
 from backend.frames import SnapshotLike
+from backend.repository import RunRow
 from backend.run_manager import RunManager
 from twin.config import FurnaceConfig
 from twin.geometry import display_meshes, specimen_plate_mesh
@@ -39,6 +47,74 @@ LAMP_ON = np.array([255, 236, 80], dtype=float)
 MIN_SPAN_K = 10.0  # colour range of the plate spans at least this many kelvin
 #: shadows cost a lot in software WebGL (headless browsers, remote desktops) and add nothing here
 NO_SHADOW: dict[str, Any] = {"cast_shadow": False, "receive_shadow": False}
+AUTO = "newest running"  # the run dropdown's first entry: follow the newest active run
+RUN_CHOICES = 30  # newest runs offered in the dropdown
+OPTIONS_EVERY_S = 2.0  # refresh of the dropdown's runs
+LIVE = ("queued", "starting", "running")
+
+
+def run_label(row: RunRow) -> str:
+    """Dropdown entry of a run: id and what it does (stable while the run's status changes)."""
+    sc = row.scenario or {}
+    ref = sc.get("reference") or {}
+    if "points" in ref:
+        what = f"{len(ref['points'])} points to {ref['points'][-1][1]:g} K"
+    else:
+        what = f"{ref.get('setpoint', 1100.0):g} K in {ref.get('t_E', 120.0):g} s"
+    osc = " · osc." if (sc.get("oscillation") or {}).get("enabled") else ""
+    when = time.strftime("%H:%M", time.localtime(row.created_at))
+    return f"{row.id} · {when} · {what}{osc}"
+
+
+@dataclass
+class StoredSnapshot:
+    """The last sample of a finished run, read back from its ``timeseries.npz`` (a ``SnapshotLike``)."""
+
+    t: float
+    eta: float
+    T_ref: float
+    T_mean_hat: float
+    field_hat: np.ndarray
+    field_true: np.ndarray
+    tc: np.ndarray
+    tc_hat: np.ndarray
+    u: np.ndarray
+    u_ff: np.ndarray
+    inhomogeneity: float
+    true_mean: float
+    true_inhomogeneity: float
+    events: tuple[str, ...] = ()
+    has_field: bool = True
+
+
+def stored_snapshot(path: Path, shape: tuple[int, int]) -> StoredSnapshot | None:
+    """The last estimated field (``field_hat[-1]``, N_y x N_x) and the last scalars of a run's time
+    series (layout in product.md); ``None`` if the file is missing, empty or unreadable.  Without a
+    stored field the plate shows the last fillet mean (``has_field=False``)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "t" not in z.files or not len(z["t"]):
+                return None
+
+            def last(key: str, n: int | None = None) -> Any:
+                if key in z.files and len(z[key]):
+                    return np.asarray(z[key][-1], dtype=float)
+                return np.full(n, np.nan) if n else float("nan")
+
+            T_mean = float(last("T_mean_hat"))
+            fh = z["field_hat"] if "field_hat" in z.files else None
+            has_field = fh is not None and len(fh) > 0 and tuple(fh.shape[1:]) == tuple(shape)
+            field = np.asarray(fh[-1], dtype=float) if has_field and fh is not None else np.full(shape, T_mean)
+            return StoredSnapshot(
+                t=float(last("t")), eta=float(np.nan_to_num(last("eta"))), T_ref=float(last("T_ref")),
+                T_mean_hat=T_mean, field_hat=field, field_true=np.full(shape, np.nan),
+                tc=last("tc", 4), tc_hat=last("tc_hat", 4), u=np.nan_to_num(last("u", 6)), u_ff=last("u_ff", 6),
+                inhomogeneity=float("nan"), true_mean=float("nan"), true_inhomogeneity=float("nan"),
+                has_field=has_field,
+            )
+    except (OSError, ValueError, KeyError, IndexError) as exc:
+        log.warning("cannot read %s for the 3D view: %s", path, exc)
+        return None
 
 
 def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -101,13 +177,16 @@ class FurnaceView:
         self.host = host
         self.port = port
         self.server: viser.ViserServer | None = None
-        self.follow: str | None = None  # run id; None = the newest active run
+        self.follow: str | None = None  # run id picked in the dropdown; None = the newest active run
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_seq = -1
         self._lamp_rgb: np.ndarray | None = None
         self._plate_rgb: np.ndarray | None = None
-        self._shown: tuple[str, SnapshotLike] | None = None
+        self._shown_id: str | None = None  # the run on the scene
+        self._static_key: tuple[str, str] | None = None  # (run id, status) of a finished run on the scene
+        self._labels: dict[str, str | None] = {AUTO: None}  # dropdown entry -> run id
+        self._options_at = 0.0
 
     @property
     def url(self) -> str:
@@ -175,6 +254,8 @@ class FurnaceView:
     def _build_gui(self) -> None:
         assert self.server is not None
         gui = self.server.gui
+        self.in_run = gui.add_dropdown("Run", (AUTO,), initial_value=AUTO,
+                                       hint="what the scene shows: the newest running run, or any run")
         self.md_status = gui.add_markdown("**furnace-twin** · no run yet")
         self.md_legend = gui.add_markdown("")
         with gui.add_folder("New run"):
@@ -196,6 +277,11 @@ class FurnaceView:
             show_housing = gui.add_checkbox("Show housing", False)
         self.md_msg = gui.add_markdown("")
 
+        @self.in_run.on_update
+        def _(_: Any) -> None:
+            self.follow = self._labels.get(self.in_run.value)
+            self._last_seq, self._static_key = -1, None  # redraw for the new choice
+
         @start.on_click
         def _(_: Any) -> None:
             speed: str | float = self.in_speed.value if self.in_speed.value == "max" else float(self.in_speed.value)
@@ -207,13 +293,14 @@ class FurnaceView:
             })
             run_id = self._call(self.manager.start(scenario))
             if run_id is not None:
-                self.follow = run_id
                 self._say(f"started run `{run_id}`")
+                self.refresh_runs(force=True)
+                self.pick(run_id)
 
         @ref_btn.on_click
         def _(_: Any) -> None:
             if (run_id := self._followed()) is None:
-                return self._say("no running run")
+                return self._say(self._not_running())
             ref = TransitionReference(setpoint=self.in_new_sp.value, t_E=self.in_new_tE.value)
             self._say("re-planning…")
             r = self._call(self.manager.change(run_id, "reference", ref))
@@ -223,7 +310,7 @@ class FurnaceView:
         @osc_btn.on_click
         def _(_: Any) -> None:
             if (run_id := self._followed()) is None:
-                return self._say("no running run")
+                return self._say(self._not_running())
             active = self.manager.active.get(run_id)
             enabled = not (active is not None and active.worker.oscillation.enabled)
             spec = OscillationSpec(enabled=enabled, amplitude=self.in_amp.value, period=self.in_period.value)
@@ -234,7 +321,7 @@ class FurnaceView:
         @stop_btn.on_click
         def _(_: Any) -> None:
             if (run_id := self._followed()) is None:
-                return self._say("no running run")
+                return self._say(self._not_running())
             try:
                 self.manager.stop(run_id)
                 self._say(f"stopping `{run_id}`")
@@ -248,6 +335,39 @@ class FurnaceView:
 
     def _say(self, text: str) -> None:
         self.md_msg.content = text
+
+    def _not_running(self) -> str:
+        if self.follow is None:
+            return "no running run"
+        return f"run `{self.follow}` is not running: pick a running one under **Run**"
+
+    def pick(self, run_id: str | None) -> None:
+        """Show ``run_id`` (``None``: the newest running run), as if picked in the dropdown."""
+        label = next((k for k, v in self._labels.items() if v == run_id), None)
+        if label is None:
+            self.refresh_runs(force=True)
+            label = next((k for k, v in self._labels.items() if v == run_id), AUTO)
+        if self.in_run.value == label:
+            self.follow = run_id
+            self._last_seq, self._static_key = -1, None
+        else:
+            self.in_run.value = label  # type: ignore[misc]  # viser's typed property; calls on_update
+
+    def refresh_runs(self, force: bool = False) -> None:
+        """Offer the newest runs in the dropdown (and the picked one, even if older)."""
+        now = time.monotonic()
+        if not force and now - self._options_at < OPTIONS_EVERY_S:
+            return
+        self._options_at = now
+        rows = self.manager.repo.list_runs(RUN_CHOICES)
+        if self.follow is not None and all(r.id != self.follow for r in rows):
+            row = self.manager.repo.get(self.follow)
+            rows += [row] if row is not None else []
+        labels: dict[str, str | None] = {AUTO: None}
+        labels.update((run_label(r), r.id) for r in rows)
+        if list(labels) != list(self.in_run.options):
+            self._labels = labels
+            self.in_run.options = tuple(labels)  # keeps the value: labels do not change with the status
 
     def _call(self, coro: Any) -> Any:
         """Run a manager coroutine on the server's event loop from viser's thread."""
@@ -264,29 +384,60 @@ class FurnaceView:
 
     # ------------------------------------------------------------------ updates
     def _followed(self) -> str | None:
+        """The run the live controls act on: the picked run while it runs, or (no pick) the newest active."""
         active = self.manager.active
-        if self.follow in active:
-            return self.follow
+        if self.follow is not None:
+            return self.follow if self.follow in active else None
         if not active:
             return None
         return max(active, key=lambda k: active[k].started_monotonic)
+
+    def target(self) -> str | None:
+        """The run the scene shows: the picked one; else the newest active; else the last one shown."""
+        if self.follow is not None:
+            return self.follow
+        return self._followed() or self._shown_id
+
+    def update(self) -> None:
+        """One scene update (the view's thread calls it at <= ``UPDATE_HZ``)."""
+        self.refresh_runs()
+        run_id = self.target()
+        if run_id is None:
+            return
+        run = self.manager.active.get(run_id)
+        if run is not None:
+            if run.worker.latest is not None and (run_id != self._shown_id or run.worker.seq != self._last_seq):
+                self._last_seq, self._static_key = run.worker.seq, None
+                self.show(run.worker.latest, run_id, run.status)
+            elif run.worker.latest is None and run_id != self._shown_id:
+                self._shown_id = run_id
+                self.md_status.content = f"**run `{run_id}`** · {run.status} (building the controller…)"
+            return
+        row = self.manager.repo.get(run_id)
+        status = row.status if row is not None else "unknown"
+        if self._static_key == (run_id, status):
+            return
+        self._static_key, self._last_seq = (run_id, status), -1
+        if status in LIVE:  # registered but not (or no longer) driven by this server
+            self._shown_id = run_id
+            self.md_status.content = f"**run `{run_id}`** · {status}"
+            return
+        s = self.cfg.specimen
+        snap = stored_snapshot(self.manager.files(run_id).timeseries, (s.ny, s.nx))
+        if snap is None:
+            self._shown_id = run_id
+            self.md_status.content = f"**run `{run_id}`** · {status}  \n no stored samples to show"
+            return
+        self.show(snap, run_id, status)
+        if not snap.has_field:
+            self.md_legend.content = "no estimated field stored: the plate shows the last fillet mean"
 
     def _run(self) -> None:
         period = 1.0 / UPDATE_HZ
         while not self._stop.is_set():
             t0 = time.monotonic()
             try:
-                run_id = self._followed()
-                run = self.manager.active.get(run_id) if run_id else None
-                if run is not None and run.worker.latest is not None and run.worker.seq != self._last_seq:
-                    self._last_seq = run.worker.seq
-                    self._shown = (run_id or "", run.worker.latest)
-                    self.show(run.worker.latest, run_id or "", run.status)
-                elif run is None and self._shown is not None:  # the run ended: say how
-                    shown_id, snap = self._shown
-                    row = self.manager.repo.get(shown_id)
-                    self.md_status.content = self._status_text(snap, shown_id, row.status if row else "ended")
-                    self._shown = None
+                self.update()
             except Exception:
                 log.exception("viser update failed")
             self._stop.wait(max(period - (time.monotonic() - t0), 0.0))
@@ -317,16 +468,22 @@ class FurnaceView:
                 self.tc_markers[k].position = (x + eta, y, 0.0)
                 reading = float(np.asarray(snap.tc)[k])
                 self.tc_labels[k].text = f"TC{k + 1} {reading:.1f} K" if np.isfinite(reading) else f"TC{k + 1} –"
+        self._shown_id = run_id
         self.md_status.content = self._status_text(snap, run_id, status)
         self.md_legend.content = f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)"
 
     @staticmethod
     def _status_text(snap: SnapshotLike, run_id: str, status: str) -> str:
+        where = "" if status in LIVE else " (last sample)"
         return (
-            f"**run `{run_id}`** · {status}  \n t = {snap.t:.1f} s · η = {1000 * float(snap.eta):.1f} mm  \n"
+            f"**run `{run_id}`** · {status}  \n t = {snap.t:.1f} s{where} · η = {1000 * float(snap.eta):.1f} mm  \n"
             f"T_ref = {snap.T_ref:.1f} K · mean (est.) = {snap.T_mean_hat:.1f} K"
         )
 
     def _tc4(self, run_id: str) -> tuple[float, float] | None:
         run = self.manager.active.get(run_id)
-        return None if run is None else run.worker.scenario.tc4
+        if run is not None:
+            return run.worker.scenario.tc4
+        row = self.manager.repo.get(run_id)
+        tc4 = (row.scenario or {}).get("tc4") if row is not None else None
+        return (float(tc4[0]), float(tc4[1])) if tc4 else None

@@ -99,12 +99,15 @@ class FakeLoop:
         self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {self.t:.1f} s")
 
     def timeseries(self) -> dict[str, Any]:
-        r = self.rows
+        r, sp = self.rows, self.cfg.specimen
         return {
             "t": np.array([s.t for s in r]), "eta": np.array([s.eta for s in r]),
             "T_ref": np.array([s.T_ref for s in r]), "T_mean_hat": np.array([s.T_mean_hat for s in r]),
             "tc": np.array([s.tc for s in r]), "tc_hat": np.array([s.tc_hat for s in r]),
             "u": np.array([s.u for s in r]), "u_ff": np.array([s.u_ff for s in r]),
+            "t_field": np.array([s.t for s in r]), "field_hat": np.array([s.field_hat for s in r]),
+            "x": (np.arange(sp.nx) + 0.5) * sp.length / sp.nx, "y": (np.arange(sp.ny) + 0.5) * sp.width / sp.ny,
+            "L_s": sp.length, "W_s": sp.width,
         }
 
     def metrics(self) -> dict[str, Any]:
