@@ -523,11 +523,12 @@ $("osc-btn").addEventListener("click", async () => {
 });
 
 $("stop-btn").addEventListener("click", async () => {
+  const runId = state.runId;
+  state.stopping = runId; // before the reply: the run's last frame may come first
+  showMsg(`stopping run ${runId}…`);
   try {
-    await api("POST", `/api/runs/${state.runId}/stop`);
-    state.stopping = state.runId;
-    showMsg(`stopping run ${state.runId}…`);
-  } catch (e) { showMsg(e.message, true); }
+    await api("POST", `/api/runs/${runId}/stop`); // the end of the run completes the message (noteStatus)
+  } catch (e) { state.stopping = null; showMsg(e.message, true); }
   setTimeout(() => { refreshRun(); refreshHistory(); }, 800);
 });
 
