@@ -84,3 +84,42 @@ def test_small_config_changes_only_the_cost(cfg):
 def test_lamp_flux_scale(cfg):
     # u = p_el / (pi d l) (paper section 2.1): 2 kW on a 10 mm x 0.26 m tube
     assert math.isclose(cfg.lamps.rated_power / cfg.lamps.horizontal.area, 2000 / (math.pi * 0.01 * 0.26))
+
+
+def _flat(d, prefix=""):
+    out = {}
+    for k, v in d.items():
+        out.update(_flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+    return out
+
+
+def test_banded_furnace_is_the_default_with_five_lamp_values_changed(cfg):
+    banded = load_config("banded")
+    a, b = _flat(cfg.model_dump()), _flat(banded.model_dump())
+    changed = {k for k in a if a[k] != b[k]}
+    assert changed == {"lamps.rated_power", "lamps.horizontal.heated_length", "lamps.horizontal.distance",
+                       "lamps.vertical.heated_length", "lamps.vertical.distance"}
+    assert banded.lamps.horizontal.distance < cfg.lamps.horizontal.distance  # the point of the variant
+    assert load_config("default") == cfg
+
+
+def test_base_chain_merges_tables_and_reports_its_errors(cfg, tmp_path):
+    (tmp_path / "mine.toml").write_text('base = "default"\n[sensors]\nnoise = 2.5\n')
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "more.toml").write_text('base = "../mine.toml"\n[ekf]\nq0 = 0.01\n')
+    more = load_config(tmp_path / "sub" / "more.toml")  # a relative base is relative to the including file
+    assert more.sensors.noise == 2.5 and more.ekf.q0 == 0.01
+    assert more.sensors.tc1 == cfg.sensors.tc1 and more.ekf.q1 == cfg.ekf.q1  # the rest of each table kept
+    (tmp_path / "a.toml").write_text('base = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('base = "a.toml"\n')
+    with pytest.raises(ConfigError, match="circular base chain"):
+        load_config(tmp_path / "a.toml")
+    (tmp_path / "c.toml").write_text("base = 3\n")
+    with pytest.raises(ConfigError, match="base must be a furnace name or a file path"):
+        load_config(tmp_path / "c.toml")
+    (tmp_path / "d.toml").write_text('base = "nowhere.toml"\n')
+    with pytest.raises(ConfigError, match="cannot read furnace config"):
+        load_config(tmp_path / "d.toml")
+    (tmp_path / "e.toml").write_text('base = "default"\n[sensors]\nnoise = -1.0\n')
+    with pytest.raises(ConfigError, match="sensors.noise"):  # the merged file is validated as a whole
+        load_config(tmp_path / "e.toml")

@@ -29,7 +29,7 @@ def _rel_point(text: str) -> tuple[float, float]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="furnace-twin", description=__doc__.splitlines()[0])
-    p.add_argument("--config", help="furnace TOML file (default: the built-in furnace)")
+    p.add_argument("--config", help="furnace TOML file, or a shipped furnace: default, banded (default: default)")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 

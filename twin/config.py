@@ -33,6 +33,11 @@ from typing import Any, Literal, Self
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 DEFAULT_CONFIG_PATH = Path(__file__).with_name("default_furnace.toml")
+#: furnaces shipped with the package, selectable by name wherever a config path is accepted
+SHIPPED_FURNACES = {
+    "default": DEFAULT_CONFIG_PATH,
+    "banded": Path(__file__).with_name("banded_furnace.toml"),
+}
 CONFIG_ENV_VAR = "FURNACE_TWIN_CONFIG"
 STEFAN_BOLTZMANN = 5.670374419e-8  # W/(m^2 K^4), CODATA 2018
 
@@ -468,23 +473,56 @@ def config_from_dict(data: Mapping[str, Any]) -> FurnaceConfig:
         raise ConfigError(_format_error(exc)) from None
 
 
-def load_config(path: str | os.PathLike[str] | None = None) -> FurnaceConfig:
-    """Load and validate a furnace TOML file.
-
-    Without a path, ``$FURNACE_TWIN_CONFIG`` is used if set, else the default furnace.
-    """
-    if path is None:
-        path = os.environ.get(CONFIG_ENV_VAR) or DEFAULT_CONFIG_PATH
+def _resolve(path: str | os.PathLike[str], relative_to: Path | None = None) -> Path:
+    """A shipped furnace's name (``default``, ``banded``) or a file path (relative to the including file)."""
+    if isinstance(path, str) and path in SHIPPED_FURNACES:
+        return SHIPPED_FURNACES[path]
     p = Path(path)
+    return relative_to.parent / p if relative_to is not None and not p.is_absolute() else p
+
+
+def _read_toml(p: Path) -> dict[str, Any]:
     try:
         text = p.read_text()
     except OSError as exc:
         raise ConfigError(f"cannot read furnace config {p}: {exc.strerror}") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"furnace config {p} is not valid TOML: {exc}") from None
-    return config_from_dict(data)
+
+
+def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """Tables merge key by key; any other value (numbers, arrays, arrays of tables) replaces the base's."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _load_raw(p: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The TOML of ``p`` with its ``base = "..."`` chain resolved (the file's own values win)."""
+    if p.resolve() in seen:
+        chain = " -> ".join(str(x) for x in (*seen, p.resolve()))
+        raise ConfigError(f"furnace config {p}: circular base chain {chain}")
+    data = _read_toml(p)
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"furnace config {p}: base must be a furnace name or a file path, got {base!r}")
+    return _merge(_load_raw(_resolve(base, p), (*seen, p.resolve())), data)
+
+
+def load_config(path: str | os.PathLike[str] | None = None) -> FurnaceConfig:
+    """Load and validate a furnace TOML file, or a shipped furnace by name (``default``, ``banded``).
+
+    Without a path, ``$FURNACE_TWIN_CONFIG`` is used if set, else the default furnace.  A file may
+    start with ``base = "default"`` (or another file, relative to it) and give only what differs.
+    """
+    if path is None:
+        path = os.environ.get(CONFIG_ENV_VAR) or DEFAULT_CONFIG_PATH
+    return config_from_dict(_load_raw(_resolve(path)))
 
 
 def small_config() -> FurnaceConfig:
