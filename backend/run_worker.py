@@ -144,7 +144,8 @@ class RunWorker:
                 if not self._changes:
                     return applied
                 ch = self._changes.popleft()
-            t = float(self.latest.t) if self.latest is not None else 0.0
+            # the first sample that uses the change (the loop counts a new reference's times from it)
+            t = float(self.latest.t) + self.cfg.sampling.t_s if self.latest is not None else 0.0
             t0 = time.monotonic()
             try:
                 if ch.kind == "reference":

@@ -35,7 +35,7 @@ class ChangeOut(BaseModel):
     body: dict[str, Any]
     requested_at: float = Field(description="unix s")
     status: str = Field(description="pending, applied, rejected, failed or cancelled")
-    applied_t: float | None = Field(None, description="simulated time of the sample it applied at (s)")
+    applied_t: float | None = Field(None, description="simulated time of the first sample that uses it (s)")
     message: str | None = None
 
 

@@ -31,7 +31,7 @@ class FakeLoop:
     eta(t) = A sin(2 pi t / period) when oscillation is on.  ``step_cost_s`` burns wall time
     per step to imitate a slow loop; ``replan_s`` sleeps inside set_reference/set_oscillation.
     A change is reported in the next snapshot's ``events``, like the real loop's.  Points of a
-    reference changed at run time t0 count from t0 (``ClosedLoop.set_reference``).
+    reference changed after the sample at t count from the next sample, t + t_s (``ClosedLoop.set_reference``).
     """
 
     cfg: Any
@@ -90,13 +90,15 @@ class FakeLoop:
     def set_reference(self, ref: Any) -> None:
         time.sleep(self.replan_s)
         check_fake_reference(self.cfg, ref)
-        self.reference, self.ref_t0, self.T_start = ref, self.t, self.T_ref(self.t)
-        self.events.append(f"reference changed at t = {self.t:.1f} s")
+        t_next = round(self.t + self.cfg.sampling.t_s, 9)  # like ClosedLoop: from the next sample on
+        self.reference, self.ref_t0, self.T_start = ref, t_next, self.T_ref(self.t)
+        self.events.append(f"reference changed at t = {t_next:.1f} s")
 
     def set_oscillation(self, spec: Any) -> None:
         time.sleep(self.replan_s)
         self.oscillation = spec
-        self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {self.t:.1f} s")
+        t_next = round(self.t + self.cfg.sampling.t_s, 9)
+        self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {t_next:.1f} s")
 
     def timeseries(self) -> dict[str, Any]:
         r, sp = self.rows, self.cfg.specimen

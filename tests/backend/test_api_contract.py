@@ -232,7 +232,7 @@ def _frames(c: TestClient, run_id: str, on_frame=None) -> list[dict]:
 
 def test_points_reference_at_start_and_live(tmp_path, small_cfg) -> None:
     """{"points": [[t, T], ...]} is a reference at the start (times from 0) and as a live change
-    (times from the sample it applies at); the frames' T_ref follows the points."""
+    (times from the first sample that uses it); the frames' T_ref follows the points."""
     with make_client(tmp_path, small_cfg) as c:
         start = {"points": [[0.0, 300.0], [2.0, 700.0], [3.0, 800.0]]}
         r = c.post("/api/runs", json={"duration": 8.0, "speed": 2.0, "reference": start})  # every sample streamed

@@ -127,6 +127,9 @@ def test_dashboard_points_run_with_live_changes(server, browser, artifacts, smal
                      ["changes"] if ch["kind"] == "reference" and ch["status"] == "applied")
     markers = _js(page, "document.getElementById('mean-plot').data[2].x")
     assert markers[2:] == pytest.approx([applied_t + 3.0, applied_t + 6.0])
+    # the reply, the loop's event and the markers agree on when the new points start
+    assert f"applied at t = {applied_t:.1f} s" in _text(page, "#ctl-msg")
+    assert any(f"reference changed at t = {applied_t:.1f} s" in e for e in _events(page)), _events(page)
     page.wait_for_function("document.getElementById('mean-plot').data[0].y.slice(-1)[0] > 999", timeout=90_000)
     # powers, TC errors and inhomogeneity are drawn as well
     assert _js(page, "document.getElementById('power-plot').data.length") == 12  # 6 groups x (u, u_ff)
