@@ -103,3 +103,64 @@ def test_fixed_specimen_and_single_housing_section(tiny, tmp_path):
     # isothermal enclosure exchanges nothing (reciprocity + closure), float32 storage ~1e-6
     q = rad.flux(T, np.zeros(cfg.lamps.n_lamps), 0.0, T_w=np.full(5, 600.0))
     assert np.max(np.abs(q)) < 1e-5 * 5.670374419e-8 * 600.0**4
+
+
+def _children(pid: int) -> set[int]:
+    """Processes whose parent is ``pid`` (Linux /proc)."""
+    from pathlib import Path
+
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.add(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    """The process exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_ray_tracing_workers_die_with_a_killed_parent(tmp_path):
+    """A server killed during a cold ray trace must not leave workers that hold the cache lock."""
+    import fcntl
+    import signal
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from twin.config import small_config\n"
+        "from twin.radiation.cache import load_or_compute\n"
+        "cfg = small_config().with_overrides({'radiation.rays_per_specimen_cell': 4000})\n"
+        "load_or_compute(cfg, cache_dir=sys.argv[1])\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)])
+    try:
+        deadline = time.monotonic() + 120.0  # imports and geometry first; the machine may be loaded
+        workers: set[int] = set()
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.1)
+            workers = _children(proc.pid)
+        assert len(workers) == 2, "the ray trace did not start its two workers"
+        time.sleep(0.5)  # the workers are inside their first position (seconds each at 4000 rays per cell)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 10.0
+    while workers and time.monotonic() < deadline:
+        workers = {w for w in workers if _alive(w)}
+        time.sleep(0.1)
+    assert not workers, f"orphaned ray-tracing workers {workers}"
+    locks = list(tmp_path.glob("*.lock"))
+    assert locks
+    with open(locks[0], "w") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises BlockingIOError while an orphan holds it

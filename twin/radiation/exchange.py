@@ -93,6 +93,26 @@ def _worker(args: tuple[FurnaceConfig, float, np.random.SeedSequence]) -> tuple[
     return _trace_position(*args)
 
 
+def _die_with_parent(parent: int) -> None:
+    """Pool initializer: a worker dies with the process that asked for the table.
+
+    A forked worker inherits the cache's lock file (twin/radiation/cache.py), so a worker that
+    outlived a killed server kept every other process from computing or reading that table
+    until its own job ended (seen: 15 minutes on a loaded machine).  Linux's PR_SET_PDEATHSIG
+    sends it SIGKILL when the parent goes; a parent already gone before that ends it at once.
+    """
+    try:
+        import ctypes
+        import signal
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):  # not Linux: the parent's normal exit still shuts the pool down
+        pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+
 def exchange_factor_table(
     cfg: FurnaceConfig, *, workers: int | None = None, on_position: Callable[[], None] | None = None
 ) -> tuple[Array, Array]:
@@ -118,7 +138,9 @@ def exchange_factor_table(
         # builds the radiation model at import would then wait on its own cache lock);
         # they only run numpy/Embree and never log.
         ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx) as pool:
+        with ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(),)
+        ) as pool:
             for F, msg, escaped in pool.map(_worker, jobs):
                 _report(msg, escaped)
                 out.append(F)
