@@ -7,6 +7,7 @@ websocket and browser tests run the real closed loop with ``small_config()``.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -194,3 +195,18 @@ def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float = 120.0)
             return body
         time.sleep(0.05)
     raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")
+
+
+def stream_frames(c: Any, run_id: str, on_frame=None) -> list[dict]:
+    """Every frame of the run's stream until it closes; ``on_frame(frame)`` may act on the run."""
+    frames = []
+    with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+        while True:
+            try:
+                f = json.loads(ws.receive_text())
+            except Exception:
+                break
+            frames.append(f)
+            if on_frame is not None:
+                on_frame(f)
+    return frames

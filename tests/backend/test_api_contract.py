@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fake_factory, wait_status
+from conftest import fake_factory, stream_frames, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
@@ -31,25 +31,21 @@ def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:
                                       "reference": {"setpoint": 900.0, "t_E": 3.0}})
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
-        frames = []
-        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
-            changed_ref = changed_osc = False
-            while True:
-                try:
-                    f = json.loads(ws.receive_text())
-                except Exception:
-                    break
-                frames.append(f)
-                if not changed_ref and f["t"] >= 1.0:
-                    ch = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1000.0, "t_E": 1.5})
-                    assert ch.status_code == 200, ch.text
-                    assert ch.json()["status"] == "applied"
-                    changed_ref = True
-                if not changed_osc and f["t"] >= 2.0:
-                    ch = c.put(f"/api/runs/{run_id}/oscillation",
-                               json={"enabled": True, "amplitude": 0.03, "period": 1.0})
-                    assert ch.status_code == 200, ch.text
-                    changed_osc = True
+        changed: set[str] = set()
+
+        def change(f: dict) -> None:
+            if "reference" not in changed and f["t"] >= 1.0:
+                ch = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1000.0, "t_E": 1.5})
+                assert ch.status_code == 200, ch.text
+                assert ch.json()["status"] == "applied"
+                changed.add("reference")
+            if "oscillation" not in changed and f["t"] >= 2.0:
+                ch = c.put(f"/api/runs/{run_id}/oscillation",
+                           json={"enabled": True, "amplitude": 0.03, "period": 1.0})
+                assert ch.status_code == 200, ch.text
+                changed.add("oscillation")
+
+        frames = stream_frames(c, run_id, change)
         keys = {"t", "eta", "T_ref", "T_mean_hat", "field", "tc", "tc_hat", "u", "u_ff", "inhomogeneity"}
         assert keys <= frames[0].keys()
         ny, nx = small_cfg.specimen.ny, small_cfg.specimen.nx
@@ -215,21 +211,6 @@ def test_real_time_factor_paces_the_samples(tmp_path, small_cfg) -> None:
         assert 15.0 < rate <= 21.0, rate
 
 
-def _frames(c: TestClient, run_id: str, on_frame=None) -> list[dict]:
-    """Every frame of the run's stream until it closes; ``on_frame(frame)`` may act on the run."""
-    frames = []
-    with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
-        while True:
-            try:
-                f = json.loads(ws.receive_text())
-            except Exception:
-                break
-            frames.append(f)
-            if on_frame is not None:
-                on_frame(f)
-    return frames
-
-
 def test_points_reference_at_start_and_live(tmp_path, small_cfg) -> None:
     """{"points": [[t, T], ...]} is a reference at the start (times from 0) and as a live change
     (times from the first sample that uses it); the frames' T_ref follows the points."""
@@ -245,7 +226,7 @@ def test_points_reference_at_start_and_live(tmp_path, small_cfg) -> None:
             if not replies and f["t"] >= 4.0:
                 replies.append(c.put(f"/api/runs/{run_id}/reference", json={"points": [[1.0, 900.0], [2.0, 950.0]]}))
 
-        frames = _frames(c, run_id, change)
+        frames = stream_frames(c, run_id, change)
         reply = replies[0]
         assert reply.status_code == 200, reply.text
         assert reply.json()["status"] == "applied" and reply.json()["body"] == {"points": [[1.0, 900.0], [2.0, 950.0]]}
@@ -321,7 +302,7 @@ def test_events_reach_the_stream_at_max_speed(tmp_path, small_cfg) -> None:
             elif replies and len(replies) == 1 and f["t"] > replies[0].json()["applied_t"] + 50.0:
                 replies.append(c.post(f"/api/runs/{run_id}/stop"))
 
-        frames = _frames(c, run_id, change)
+        frames = stream_frames(c, run_id, change)
         assert replies[0].status_code == 200, replies[0].text
         seqs = [f["seq"] for f in frames]
         assert max(b - a for a, b in zip(seqs, seqs[1:], strict=False)) > 10  # samples were skipped

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import wait_status
+from conftest import stream_frames, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
@@ -31,20 +31,17 @@ def finished_run(tmp_path_factory, small_cfg):
         r = c.post("/api/runs", json=SCENARIO)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
-        frames, changes = [], {}
-        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
-            while True:
-                try:
-                    f = json.loads(ws.receive_text())
-                except Exception:
-                    break
-                frames.append(f)
-                if "reference" not in changes and f["t"] >= REF_AT:
-                    resp = c.put(f"/api/runs/{run_id}/reference", json=NEW_REF)
-                    changes["reference"] = (resp, time.time())
-                if "oscillation" not in changes and f["t"] >= OSC_AT:
-                    resp = c.put(f"/api/runs/{run_id}/oscillation", json=NEW_OSC)
-                    changes["oscillation"] = (resp, time.time())
+        changes: dict = {}
+
+        def change(f: dict) -> None:
+            if "reference" not in changes and f["t"] >= REF_AT:
+                resp = c.put(f"/api/runs/{run_id}/reference", json=NEW_REF)
+                changes["reference"] = (resp, time.time())
+            if "oscillation" not in changes and f["t"] >= OSC_AT:
+                resp = c.put(f"/api/runs/{run_id}/oscillation", json=NEW_OSC)
+                changes["oscillation"] = (resp, time.time())
+
+        frames = stream_frames(c, run_id, change)
         body = wait_status(c, run_id, {"finished", "error"})
         metrics = c.get(f"/api/runs/{run_id}/metrics")
         npz = c.get(f"/api/runs/{run_id}/timeseries")
