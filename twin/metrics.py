@@ -57,15 +57,18 @@ def fillet_mask(x: Array, y: Array, L_s: float, W_s: float) -> NDArray[np.bool_]
     return (X >= 0.25 * L_s) & (X <= 0.75 * L_s) & (Y >= 0.2 * W_s) & (Y <= 0.8 * W_s)
 
 
-def sup_norm(field: Array, T_ref: Array | float, mask: NDArray[np.bool_]) -> Array:
-    """T_sup = max over the fillet |field - T_ref| for fields (m, N_y, N_x) -> (m,) in K."""
+def sup_norm(field: Array, T_ref: Array | float, mask: NDArray[np.bool_] | NDArray[np.intp]) -> Array:
+    """T_sup = max over the fillet |field - T_ref| for fields (m, N_y, N_x) -> (m,) in K.
+
+    ``mask`` is the fillet's boolean (N_y, N_x) mask, or its flat indices for flattened fields (m, N_s).
+    """
     f = np.asarray(field, float)[..., mask]
     ref = np.asarray(T_ref, float)
     return np.max(np.abs(f - (ref[..., None] if ref.ndim else ref)), axis=-1)
 
 
-def fillet_mean(field: Array, mask: NDArray[np.bool_]) -> Array:
-    """Mean of the field over the fillet grid points (K)."""
+def fillet_mean(field: Array, mask: NDArray[np.bool_] | NDArray[np.intp]) -> Array:
+    """Mean of the field over the fillet grid points (K); ``mask`` as in :func:`sup_norm`."""
     return np.asarray(field, float)[..., mask].mean(axis=-1)
 
 
