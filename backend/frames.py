@@ -19,7 +19,7 @@ FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps fr
 
 
 class SnapshotLike(Protocol):
-    """What the backend reads from ``twin.loop.Snapshot`` (docs/interfaces.md)."""
+    """What the backend reads from ``twin.runs.loop.Snapshot`` (docs/interfaces.md)."""
 
     t: float
     eta: float

@@ -1,5 +1,5 @@
 """After a restart: runs that were going when the server died are marked ``interrupted``, and
-their metrics are recomputed from the last flushed ``timeseries.npz`` (``twin.metrics``), so
+their metrics are recomputed from the last flushed ``timeseries.npz`` (``twin.runs.metrics``), so
 their data up to the crash stays readable and comparable."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 from backend.frames import json_safe
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
-from twin.metrics import compute_metrics
+from twin.runs.metrics import compute_metrics
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.frames import json_safe
-from twin.loop import save_timeseries
+from twin.runs.loop import save_timeseries
 
 RECORDING = "recording.rrd"
 TIMESERIES = "timeseries.npz"

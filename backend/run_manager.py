@@ -49,7 +49,7 @@ class LimitExceeded(ValueError):
 
 
 class DefaultLoopFactory:
-    """Builds ``twin.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -66,14 +66,14 @@ class DefaultLoopFactory:
             return self._radiation[key]
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
-        """Fillet means the furnace can hold (``twin.reference.reachable_range``), cached per furnace;
+        """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
         ``None`` if they cannot be computed (the run's own build then reports the problem)."""
         key = cfg.digest()
         if key in self._T_range:
             return self._T_range[key]
         try:
-            from twin.fe_model import discrete_model
-            from twin.reference import reachable_range
+            from twin.control.reference import reachable_range
+            from twin.model.discrete import discrete_model
 
             T_range = reachable_range(discrete_model(cfg, self.radiation(cfg), None), cfg)
         except Exception:
@@ -83,17 +83,17 @@ class DefaultLoopFactory:
         return T_range
 
     def check_reference(self, cfg: FurnaceConfig, reference: Reference) -> None:
-        """Raise ``ValueError`` (``twin.reference.ReferenceError``) if the loop would refuse ``reference``
+        """Raise ``ValueError`` (``twin.control.reference.ReferenceError``) if the loop would refuse ``reference``
         at the start of a run, so ``POST /api/runs`` answers 422 instead of a run that ends in error."""
         T_range = self.reachable_range(cfg)
         if T_range is None:
             return
-        from twin.reference import reference_trajectory
+        from twin.control.reference import reference_trajectory
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
-        from twin.loop import ClosedLoop
+        from twin.runs.loop import ClosedLoop
 
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
         loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg), background=True)

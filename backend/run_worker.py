@@ -1,6 +1,6 @@
 """One run's closed loop, driven from its own worker thread.
 
-:class:`RunWorker` owns the ``twin.loop.ClosedLoop`` of a run and everything the run
+:class:`RunWorker` owns the ``twin.runs.loop.ClosedLoop`` of a run and everything the run
 writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its database
 rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
 each call steps the loop as far as the speed allows (real time x factor, or as fast as
@@ -32,7 +32,7 @@ log = logging.getLogger(__name__)
 
 
 class LoopLike(Protocol):
-    """The part of ``twin.loop.ClosedLoop`` the backend uses (docs/interfaces.md)."""
+    """The part of ``twin.runs.loop.ClosedLoop`` the backend uses (docs/interfaces.md)."""
 
     @property
     def done(self) -> bool: ...

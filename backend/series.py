@@ -2,7 +2,7 @@
 
 The scalar series are decimated to at most ``max_points`` samples (every k-th sample, the last
 one always kept); the inhomogeneity T_sup(t) = max over the fillet |T_hat - T_ref| (product.md)
-is recomputed from ``field_hat`` at ``t_field`` with ``twin.metrics``.
+is recomputed from ``field_hat`` at ``t_field`` with ``twin.runs.metrics``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from backend.frames import json_safe
-from twin.metrics import fillet_mask, sup_norm
+from twin.runs.metrics import fillet_mask, sup_norm
 
 SCALARS = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 

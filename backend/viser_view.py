@@ -3,7 +3,7 @@
 The specimen plate is coloured per vertex by the estimated field and moves with eta between
 the two lamp arrays; each lamp is coloured by its group's power (dark = off, bright yellow =
 u_max); the gold reflectors, the holders (moving with the plate), the quartz window and,
-optionally, the housing are drawn from ``twin.geometry.display_meshes``.  TC markers show
+optionally, the housing are drawn from ``twin.physics.geometry.display_meshes``.  TC markers show
 their readings.  The GUI mirrors the REST controls: start, stop, oscillation, setpoint.
 
 The "Run" dropdown picks what the scene shows: "newest running" (the default) follows the
@@ -35,7 +35,7 @@ from backend.frames import SnapshotLike
 from backend.repository import RunRow
 from backend.run_manager import RunManager
 from twin.config import FurnaceConfig
-from twin.geometry import display_meshes, specimen_plate_mesh
+from twin.physics.geometry import display_meshes, specimen_plate_mesh
 from twin.scenario import OscillationSpec, Scenario, TransitionReference
 
 log = logging.getLogger(__name__)

@@ -103,19 +103,19 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return precompute_command(cfg, force=args.force)
         if args.command == "simulate":
-            from twin.simulate import simulate_command
+            from twin.runs.open_loop import simulate_command
 
             return simulate_command(cfg, args)
         if args.command == "run":
-            from twin.runner import run_command
+            from twin.runs.runner import run_command
 
             return run_command(cfg, args, sink_factories=[_recording_sink(cfg)])
         if args.command == "campaign":
-            from twin.campaign import campaign_command
+            from twin.runs.campaign import campaign_command
 
             return campaign_command(cfg, args, sink_factories=[_recording_sink(cfg)])
         if args.command == "bench":
-            from twin.bench import bench_command
+            from twin.runs.bench import bench_command
 
             return bench_command(cfg, args)
     except ConfigError as exc:

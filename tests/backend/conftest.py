@@ -1,6 +1,6 @@
 """Fixtures of the backend tests (no package: pytest's rootdir-relative import).
 
-``FakeLoop`` is a small, fast stand-in for ``twin.loop.ClosedLoop`` used only where the test
+``FakeLoop`` is a small, fast stand-in for ``twin.runs.loop.ClosedLoop`` used only where the test
 is about the backend's plumbing (queues, limits, status codes, schemathesis); the lifecycle,
 websocket and browser tests run the real closed loop with ``small_config()``.
 """
@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from twin.loop import Snapshot  # the real snapshot type: the stand-in loop differs only in physics
+from twin.runs.loop import Snapshot  # the real snapshot type: the stand-in loop differs only in physics
 
 REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault("FURNACE_TWIN_CACHE", str(REPO / ".cache" / "test-radiation"))

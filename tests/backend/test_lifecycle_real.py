@@ -99,7 +99,7 @@ def test_oscillation_toggle_visible_in_frames(finished_run) -> None:
 
 
 def test_files_and_metrics(finished_run, small_cfg) -> None:
-    from twin.metrics import compute_metrics
+    from twin.runs.metrics import compute_metrics
 
     assert finished_run["metrics"].status_code == 200
     metrics = finished_run["metrics"].json()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from backend.viser_view import LAMP_OFF, LAMP_ON, MIN_SPAN_K, colour_range, lamp_colors, plate_mesh, turbo_rgb
-from twin.geometry import specimen_plate_mesh
+from twin.physics.geometry import specimen_plate_mesh
 
 
 def test_vertex_values_of_a_linear_field_are_exact_inside(small_cfg) -> None:

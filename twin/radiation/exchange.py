@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
-from twin.geometry import FurnaceGeometry, furnace_geometry
+from twin.physics.geometry import FurnaceGeometry, furnace_geometry
 from twin.radiation.raytrace import trace_exchange_factors
 from twin.radiation.reciprocity import enforce_reciprocity_closure
 

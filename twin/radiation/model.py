@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.geometry import furnace_geometry
+from twin.physics.geometry import furnace_geometry
 from twin.radiation.net_radiation import net_radiation_matrix, specimen_matrices
 
 Array = NDArray[np.float64]

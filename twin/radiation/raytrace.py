@@ -28,7 +28,7 @@ than with independent random numbers, i.e. about half the rays for the same accu
 Example
 -------
 >>> import numpy as np
->>> from twin.geometry import build_enclosure, rectangle
+>>> from twin.physics.geometry import build_enclosure, rectangle
 >>> a = rectangle(np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
 >>> b = rectangle(np.array([0, 0, 1.0]), np.array([0, 1.0, 0]), np.array([1.0, 0, 0]))
 >>> enc = build_enclosure([(0, *a), (1, *b)], np.zeros(2))
@@ -49,7 +49,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 from numpy.typing import NDArray
 
-from twin.geometry import Enclosure
+from twin.physics.geometry import Enclosure
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]

@@ -1,0 +1,123 @@
+"""Reference trajectories (twin.control.reference): C1 transition, C1 points, validation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from controller_standin import make_standin
+from pydantic import ValidationError
+
+from twin.config import small_config
+from twin.control.reference import (
+    ReferenceError,
+    coldest_surrounding,
+    reachable_range,
+    reference_trajectory,
+    steady_state,
+)
+from twin.scenario import PointsReference, TransitionReference
+
+
+def _c1_jumps(ref, knots, h=1e-6):
+    """Largest jump of value and of slope across the knots (one-sided finite differences)."""
+    jv, js = 0.0, 0.0
+    for k in knots:
+        left = ref(np.array([k - 2 * h, k - h, k]))
+        right = ref(np.array([k, k + h, k + 2 * h]))
+        jv = max(jv, abs(left[-1] - right[0]))
+        s_left = (3 * left[2] - 4 * left[1] + left[0]) / (2 * h)  # second-order one-sided
+        s_right = (-3 * right[0] + 4 * right[1] - right[2]) / (2 * h)
+        js = max(js, abs(s_left - s_right))
+    return jv, js
+
+
+def test_transition_endpoints_midpoint_and_rate():
+    ref = reference_trajectory(TransitionReference(setpoint=1100.0, t_E=120.0), 300.0)
+    assert ref(np.array([0.0]))[0] == 300.0 and ref(np.array([120.0]))[0] == 1100.0
+    assert ref(np.array([-5.0, 500.0])).tolist() == [300.0, 1100.0]  # constant outside
+    # cubic step 3 s^2 - 2 s^3 at s = 1/2 is 1/2 and at s = 1/4 is 5/32 (hand computation)
+    assert ref(np.array([60.0]))[0] == pytest.approx(700.0, rel=1e-14)
+    assert ref(np.array([30.0]))[0] == pytest.approx(300.0 + 800.0 * 5 / 32, rel=1e-14)
+    # the maximum rate 1.5 (T_E - T_0) / t_E = 10 K/s is reached at t_E / 2
+    assert ref.rate(np.array([60.0]))[0] == pytest.approx(10.0, rel=1e-12)
+    assert ref.transition_time == 120.0
+
+
+def test_transition_is_c1_and_monotone():
+    ref = reference_trajectory(TransitionReference(setpoint=900.0, t_E=50.0), 350.0, t_start=10.0)
+    jv, js = _c1_jumps(ref, [10.0, 60.0])
+    # finite-difference slopes with h = 1e-6 s on ~1000 K values: round-off ~ 1e-13 * 1000 / 1e-6 = 1e-4 K/s
+    assert jv < 1e-9 and js < 1e-3
+    t = np.linspace(0, 100, 2001)
+    assert np.all(np.diff(ref(t)) >= 0)
+    assert ref(np.array([9.0]))[0] == 350.0  # before t_start: the initial mean
+
+
+def test_points_pass_through_and_are_c1():
+    spec = PointsReference(points=[(20.0, 600.0), (60.0, 1000.0), (80.0, 1000.0), (120.0, 900.0)])
+    ref = reference_trajectory(spec, 300.0, t_start=5.0)
+    # through every point (times relative to t_start) and the initial mean at t_start
+    np.testing.assert_allclose(ref(np.array([5.0, 25.0, 65.0, 85.0, 125.0])),
+                               [300.0, 600.0, 1000.0, 1000.0, 900.0], rtol=1e-14)
+    jv, js = _c1_jumps(ref, [5.0, 25.0, 65.0, 85.0, 125.0])
+    assert jv < 1e-9 and js < 1e-3  # as above: finite-difference round-off
+    assert ref(np.array([400.0]))[0] == 900.0 and ref.t_end == 125.0
+    # monotone between monotone data (Fritsch-Carlson): no overshoot above 1000 K on the plateau
+    t = np.linspace(5, 125, 4001)
+    assert ref(t).max() <= 1000.0 + 1e-9
+    assert np.all(np.diff(ref(np.linspace(5, 65, 1001))) >= -1e-12)
+
+
+def test_single_point_at_zero_is_constant():
+    ref = reference_trajectory(PointsReference(points=[(0.0, 800.0)]), 300.0)
+    assert ref(np.array([0.0, 10.0])).tolist() == [800.0, 800.0]
+    assert ref.rate(np.array([1.0]))[0] == 0.0
+
+
+def test_non_increasing_times_are_rejected():
+    with pytest.raises(ValidationError, match="strictly increasing"):
+        PointsReference(points=[(10.0, 500.0), (10.0, 600.0)])
+    # a spec that bypassed validation still gets a clear error from the reference itself
+    bad = PointsReference.model_construct(points=[(10.0, 500.0), (5.0, 600.0)])
+    with pytest.raises(ReferenceError, match="strictly increasing"):
+        reference_trajectory(bad, 300.0)
+
+
+def test_unreachable_temperatures_are_rejected():
+    with pytest.raises(ReferenceError, match="unreachable"):
+        reference_trajectory(TransitionReference(setpoint=1200.0), 300.0, T_range=(320.0, 1150.0))
+    with pytest.raises(ReferenceError, match="unreachable"):
+        reference_trajectory(PointsReference(points=[(10.0, 310.0)]), 400.0, T_range=(320.0, 1150.0))
+    with pytest.raises(ReferenceError):
+        reference_trajectory(TransitionReference(), float("nan"))
+
+
+def test_coldest_surrounding_is_config_minimum():
+    cfg = small_config()
+    lowest = min(cfg.housing.temperature, cfg.reflector.temperature, cfg.inert_gas.temperature_top,
+                 cfg.holders.temperature_upper, cfg.holders.temperature_lower, cfg.inert_gas.temperature_bottom)
+    assert coldest_surrounding(cfg) == lowest
+
+
+def test_steady_state_and_reachable_range_on_linear_oracle():
+    # with radiation switched off the stand-in is linear: (I - F_theta) theta = t_s B u solves it exactly
+    model = make_standin()
+    model.k_r = np.zeros(model.n)
+    model.A_c = model.A_c - 0.05 * np.eye(model.n)  # losses to 0 K so a steady state exists
+    u = np.full(model.m, 0.7)
+    exact = np.linalg.solve(-model.A_c, model.B @ u)
+    theta = steady_state(model, u, np.full(model.n, 500.0))
+    np.testing.assert_allclose(theta, exact, rtol=1e-10)
+    cfg = small_config()
+    lo, hi = reachable_range(model, cfg)
+    exact_full = np.linalg.solve(-model.A_c, model.B @ np.ones(model.m))
+    assert lo == coldest_surrounding(cfg)
+    assert hi == pytest.approx(float(model.c_m @ exact_full), rel=1e-10)
+
+
+def test_steady_state_of_nonlinear_standin_is_fixed_point():
+    model = make_standin()
+    u = np.full(model.m, 0.5)
+    theta = steady_state(model, u, np.full(model.n, 700.0))
+    # Newton tolerance 1e-6 K; one more step of the model moves it by t_s |f| << 1e-6 K
+    assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6

@@ -1,0 +1,583 @@
+"""Optimal feedforward control (paper section 4.1, eqs. 18-21): the plan u_ff, theta_ref.
+
+The OCP (20) is posed for CasADi's ``nlpsol`` and solved by IPOPT:
+
+    min  sum_j g0 e_j^2 + g1 kappa_j          e_j = c_m^T theta_j - T_ref,j  (19),
+                                              kappa_j = theta_j^T W theta_j  (21)
+    s.t. theta_j+1 = F(theta_j, sat(v_j u_c)),  theta_0 = theta0,
+         max(u_c) = 1,  0 <= u_c <= 1                                         (20b-e)
+
+over the horizon beta t_E.  Choices made to keep it small, smooth and fast:
+
+* **Coarse grid, single shooting.**  N = beta t_E / t_s = 1440 samples of a 117-state
+  model are too many for a multiple-shooting NLP within seconds.  v is held over
+  intervals of ``interval`` s (default 1 s = 10 samples; held rather than linear, see
+  :class:`twin.control.shooting.ScaledDistribution`), and the model's right-hand side
+  f = (F(theta, u) - theta) / t_s of eq. (12a) is integrated over each interval with
+  Heun's method (2nd order; substeps keep h |lambda_max| <= 1, inside its stability
+  region).  Any explicit Runge-Kutta step has the same steady states as (12a).  The
+  cost is the trapezoidal sum over the knots, per sample.  Only m + K parameters
+  remain; :mod:`twin.control.shooting` returns the cost, its exact gradient (forward
+  sensitivities, checked against an adjoint) and a Hessian: Gauss-Newton plus the
+  exact curvature of the input map (saturation, product v d).  IPOPT gets them
+  through CasADi callbacks (options ``grad_f``, ``hess_lag``).  Without the input
+  curvature IPOPT needed hundreds of iterations; with it about 20-35.
+* **Fine-grid plan.**  u_ff,j = sat(v_j u_c) with the exact sat of eq. (18) at every
+  sample, theta_ref = the fine model (12a) driven by u_ff, T_mean = c_m^T theta_ref,
+  and ``plan.max_mean_error`` = max_j |T_mean,j - T_ref,j| measures what the coarse
+  OCP grid and the smoothing cost on the real discrete model.
+* **Scale of u_c.**  The set {v u_c : v >= 0, max(u_c) = 1} equals {v d : v >= 0,
+  d >= 0, eta^T d = 1} for any eta > 0: both are all non-negative directions.  IPOPT
+  gets the linear (smooth) constraint eta^T d = 1 instead of the non-smooth max (20d),
+  with eta_i the fillet-mean heating rate of group i (:func:`heating_efficiency`), so
+  that v is nearly the mean heating power whatever the distribution (with 1^T d = 1
+  the valley between d and v is curved and IPOPT crawls along it).  The solution is
+  rescaled to u_c = d / max(d), v = v max(d): (20d) holds exactly, inputs unchanged.
+* **Saturation.**  With v >= 0 and u_c >= 0 the lower bound of sat is never active;
+  the upper one is replaced in the OCP by the smooth minimum
+  ``(z + 1 - sqrt((z - 1)^2 + w^2)) / 2``, width w = ``cfg.feedforward.smoothing``
+  (at most w/2 below min(z, 1)).
+* **Unparametrized OCP** (``parametrized=False``, Remark 4): free inputs held over the
+  same intervals, 0 <= u <= 1; comparing the objectives shows what (18) trades away.
+
+IPOPT's status and iteration count are reported in the plan; a failed solve raises
+:class:`FeedforwardError` unless ``best_effort=True``.
+
+Example
+-------
+>>> plan = solve_feedforward(model, theta0, 0.0, ref, cfg)   # doctest: +SKIP
+>>> plan.status, plan.u_ff.shape                              # doctest: +SKIP
+('Solve_Succeeded', (1440, 6))
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from twin.config import FurnaceConfig
+from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution, casadi_objective
+from twin.model.dynamics import DiscreteDynamics
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+RefFn = Callable[[Any], Any]
+
+#: Width of the v-knot grid of the OCP (s).  A numerical choice, not a furnace parameter.
+DEFAULT_INTERVAL_S = 1.0
+#: Largest h |lambda_max| of the Heun substeps (stability limit of Heun on the real axis is 2).
+HEUN_STEP_LIMIT = 1.0
+#: Upper bound of v in the scaling eta^T d = 1 (mean eta = 1): every group with d_i >= 1/V_MAX can
+#: saturate, and v = V_MAX is V_MAX times the mean heating power of all groups at full power.
+V_MAX = 20.0
+#: rho of the Tikhonov term rho * mean_k(v_k^2) (K^2) added to (20a): far below one K^2 of
+#: tracking error, it only removes the flat directions of v where every used group saturates
+#: (there the cost does not depend on v and the Gauss-Newton Hessian is singular).
+INPUT_REGULARIZATION = 1e-3
+#: Smallest share (of the largest group) a warm-started distribution starts with.
+WARM_FLOOR = 0.05
+#: Shortest OCP horizon in fillet-mean time constants (a re-plan at or after the end of a
+#: transition still needs the settling; 2 tau = 86 % settled, a compromise with the re-plan time).
+SETTLE_TIME_CONSTANTS = 2.0
+#: Longest reference the horizon search looks at (s): scenario.MAX_DURATION_S.
+MAX_REFERENCE_S = 3600.0
+
+
+class FeedforwardError(RuntimeError):
+    """IPOPT did not solve the feedforward OCP; ``status`` holds its return status."""
+
+    def __init__(self, message: str, status: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass(frozen=True)
+class FeedforwardPlan:
+    """Feedforward inputs and the nominal reference state along them (eq. 17, section 4).
+
+    Sample j of the plan is at run time ``t[j] = t0 + j t_s``.
+
+    Attributes
+    ----------
+    t : array (N + 1,)
+        Run times (s) of the samples 0..N.
+    u_ff : array (N, m)
+        Feedforward group fractions u_ff,j, held over [t_j, t_j+1) (eq. 18).
+    theta_ref : array (N + 1, n)
+        Nominal model state (K) under u_ff from the plan's initial state (eq. 12a, w = 0).
+    T_ref : array (N + 1,)
+        Requested fillet mean temperature T_ref,j (K) at ``t``.
+    T_mean : array (N + 1,)
+        Fillet mean of the nominal state, c_m^T theta_ref,j (K) (eq. 19).
+    status : str
+        IPOPT return status (``"Solve_Succeeded"`` ...) or the name of the source of the plan.
+    iterations : int
+        IPOPT iterations.
+    solve_s : float
+        Wall time of the whole plan (OCP set-up, solve, fine simulation) (s).
+    success : bool
+        Whether the solver reported success.
+    u_c : array (m,) or None
+        Constant power distribution of eq. (18), max(u_c) = 1 (parametrized OCP), else None.
+    v : array (N,) or None
+        Scalar amplification v_j of eq. (18) at the samples (parametrized OCP), else None.
+    objective : float
+        Cost (20a) of the fine-grid plan, per sample: mean of g0 e_j^2 + g1 kappa_j (K^2).
+    warm : dict
+        Solver data to warm-start a later OCP (knot times, decision values).
+    """
+
+    t: Array
+    u_ff: Array
+    theta_ref: Array
+    T_ref: Array
+    T_mean: Array
+    status: str
+    iterations: int
+    solve_s: float
+    success: bool
+    u_c: Array | None = None
+    v: Array | None = None
+    objective: float = float("nan")
+    warm: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def t0(self) -> float:
+        """Run time (s) of the first sample."""
+        return float(self.t[0])
+
+    @property
+    def t_s(self) -> float:
+        """Sampling time (s)."""
+        return float(self.t[1] - self.t[0])
+
+    @property
+    def n_steps(self) -> int:
+        """N, the number of input samples."""
+        return int(self.u_ff.shape[0])
+
+    @property
+    def max_mean_error(self) -> float:
+        """max_j |c_m^T theta_ref,j - T_ref,j| (K): how well the nominal plan tracks T_ref."""
+        return float(np.max(np.abs(self.T_mean - self.T_ref)))
+
+    def index_at(self, t: float) -> int:
+        """Sample index j of run time ``t`` (s) relative to the plan start (may be >= N)."""
+        return int(round((t - self.t0) / self.t_s))
+
+    def sample(self, j: int) -> tuple[Array, Array, float]:
+        """(u_ff,j, theta_ref,j, T_ref,j); beyond the horizon the last values are held."""
+        if j < 0:
+            raise IndexError(f"sample {j} lies before the plan start")
+        ju = min(j, self.n_steps - 1)
+        jx = min(j, self.n_steps)
+        return self.u_ff[ju], self.theta_ref[jx], float(self.T_ref[jx])
+
+    def v_at(self, t: ArrayLike) -> Array:
+        """v(t) of the parametrized plan at run times ``t`` (held per OCP interval and outside)."""
+        tk = np.asarray(self.warm["t_knots"], float)
+        v = np.asarray(self.warm["v"], float)
+        k = np.clip(np.searchsorted(tk, np.asarray(t, float), side="right") - 1, 0, len(v) - 1)
+        return np.asarray(v[k], float)
+
+
+# --------------------------------------------------------------------------- helpers
+def simulate(model: DiscreteDynamics, theta0: ArrayLike, u: ArrayLike) -> Array:
+    """theta_0..theta_N of eq. (12a) with w = 0 under the inputs u (N, m); shape (N + 1, n)."""
+    uu = np.asarray(u, float)
+    out = np.empty((uu.shape[0] + 1, model.n))
+    out[0] = np.asarray(theta0, float)
+    for j in range(uu.shape[0]):
+        out[j + 1] = model.step(out[j], uu[j])
+    return out
+
+
+def saturation(z: ArrayLike) -> Array:
+    """sat of eq. (18) for u_max = 1: clip to [0, 1]."""
+    return np.clip(np.asarray(z, float), 0.0, 1.0)
+
+
+def _ca() -> Any:
+    import casadi
+
+    return casadi
+
+
+def transition_end(ref: RefFn, t0: float, t_s: float) -> float:
+    """Run time (s) from which T_ref is constant: ``ref.t_end`` if it has one, else found by scanning."""
+    t_end = getattr(ref, "t_end", None)
+    if t_end is not None:
+        return float(t_end)
+    t = t0 + np.arange(0.0, MAX_REFERENCE_S + t_s, t_s)
+    T = np.asarray(ref(t), float)
+    moving = np.nonzero(np.abs(T - T[-1]) > 1e-9 * max(1.0, abs(float(T[-1]))))[0]
+    return float(t[moving[-1] + 1]) if moving.size else float(t0)
+
+
+def mean_time_constant(model: DiscreteDynamics, theta: ArrayLike, u: ArrayLike) -> float:
+    """tau (s) of the fillet mean: 1 / (-c_m^T J 1), J = (dF/dtheta - I) / t_s (eqs. 12a, 16, 19).
+
+    -c_m^T J 1 is the rate (1/s) at which the fillet mean relaxes after a uniform
+    temperature rise of the specimen, i.e. its net loss coefficient.
+    """
+    J = (np.asarray(model.jac_theta(np.asarray(theta, float), np.asarray(u, float)), float)
+         - np.eye(model.n)) / model.t_s
+    rate = -float(np.asarray(model.c_m, float) @ J @ np.ones(model.n))
+    return 1.0 / max(rate, 1e-6)
+
+
+def _fastest_rate(model: DiscreteDynamics, theta: Array, u: Array) -> float:
+    J = (np.asarray(model.jac_theta(theta, u), float) - np.eye(model.n)) / model.t_s
+    return float(np.max(np.abs(np.linalg.eigvals(J))))
+
+
+def _heun_interval(model: DiscreteDynamics, theta: Array, u: Array, dt: float, n_heun: int) -> Array:
+    """theta after dt under constant u: Heun substeps on f = (F - theta) / t_s (eq. 12a)."""
+    h = dt / n_heun
+    for _ in range(n_heun):
+        k1 = (np.asarray(model.step(theta, u), float) - theta) / model.t_s
+        mid = theta + h * k1
+        k2 = (np.asarray(model.step(mid, u), float) - mid) / model.t_s
+        theta = theta + 0.5 * h * (k1 + k2)
+    return theta
+
+
+def _tracking_amplification(model: DiscreteDynamics, dt: float, n_heun: int, T_knots: Array, th0: Array,
+                            d: Array, width: float) -> Array:
+    """v_k per interval such that u = smin(v_k d) brings c_m^T theta to T_ref at the next knot.
+
+    A cheap inversion of the mean dynamics knot by knot (regula falsi on v in
+    [0, V_MAX]; the mean after an interval grows monotonically with v), so the OCP
+    starts from good mean tracking with the given distribution d.
+    """
+    from twin.control.shooting import smooth_min1
+
+    K = len(T_knots) - 1
+    v_out = np.empty(K)
+    theta = np.asarray(th0, float)
+    c = np.asarray(model.c_m, float)
+
+    def mean_after(v: float) -> tuple[float, Array]:
+        nxt = _heun_interval(model, theta, smooth_min1(v * d, width)[0], dt, n_heun)
+        return float(c @ nxt), nxt
+
+    for k in range(K):
+        target = T_knots[k + 1]
+        a, (fa, xa) = 0.0, mean_after(0.0)
+        b, (fb, xb) = V_MAX, mean_after(V_MAX)
+        if target <= fa:
+            v, theta = a, xa
+        elif target >= fb:
+            v, theta = b, xb
+        else:
+            v, x = a, xa
+            for _ in range(12):  # Illinois regula falsi: superlinear, bracket kept
+                v = b - (fb - target) * (b - a) / (fb - fa)
+                fv, x = mean_after(v)
+                if abs(fv - target) < 1e-3:
+                    break
+                if (fv - target) * (fb - target) < 0:
+                    a, fa = b, fb
+                else:
+                    fa = target + 0.5 * (fa - target)
+                b, fb = v, fv
+            theta = x
+        v_out[k] = v
+    return v_out
+
+
+# --------------------------------------------------------------------------- the NLP
+@dataclass(frozen=True)
+class _Grid:
+    t0: float
+    t_s: float
+    substeps: int  # samples per knot interval
+    K: int  # knot intervals
+
+    @property
+    def N(self) -> int:
+        return self.K * self.substeps
+
+    @property
+    def dt(self) -> float:
+        return self.substeps * self.t_s
+
+    @property
+    def t_knots(self) -> Array:
+        return np.asarray(self.t0 + self.dt * np.arange(self.K + 1), dtype=np.float64)
+
+    @property
+    def t_fine(self) -> Array:
+        return np.asarray(self.t0 + self.t_s * np.arange(self.N + 1), dtype=np.float64)
+
+
+def _knot_weights(grid: _Grid) -> Array:
+    """Trapezoidal weights over knots 1..K (knot 0 is fixed), normalized to the mean per sample."""
+    w = np.full(grid.K, float(grid.substeps))
+    w[-1] *= 0.5
+    return w / grid.N
+
+
+def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | None) -> dict[str, Any]:
+    """IPOPT options (stack-notes.md).
+
+    The adaptive barrier update suits the many bounds of (d, v).  Besides the strict
+    stop (scaled KKT error < 1e-6, "Solve_Succeeded") IPOPT may stop early with
+    "Solved_To_Acceptable_Level" once the objective changes by less than 2e-3
+    (relative) in 3 consecutive iterations: the kinks of the (smoothed) saturation
+    make IPOPT creep for tens of iterations over the last ~1 % of the objective
+    (~0.4 K^2 per sample on the default run), which does not change the plan noticeably.
+    """
+    opts: dict[str, Any] = {
+        "ipopt.print_level": 0,
+        "print_time": 0,
+        "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iter,
+        "ipopt.mu_strategy": "adaptive",
+        "ipopt.tol": 1e-6,
+        "ipopt.acceptable_tol": 1e6,  # the acceptable stop rests on the objective change (above)
+        "ipopt.acceptable_obj_change_tol": 2e-3,
+        "ipopt.acceptable_iter": 3,
+        "ipopt.max_wall_time": max_wall_s,
+        "error_on_fail": False,
+    }
+    opts.update(extra or {})
+    return opts
+
+
+def solve_feedforward(
+    model: DiscreteDynamics,
+    theta0: ArrayLike,
+    t0: float,
+    T_ref_fn: RefFn,
+    cfg: FurnaceConfig,
+    warm_start: FeedforwardPlan | None = None,
+    parametrized: bool = True,
+    *,
+    horizon: float | None = None,
+    interval: float = DEFAULT_INTERVAL_S,
+    best_effort: bool = False,
+    max_iter: int = 400,
+    max_wall_s: float = 120.0,
+    ipopt_options: dict[str, Any] | None = None,
+) -> FeedforwardPlan:
+    """Solve the feedforward OCP (20) from theta0 at run time t0 and return the plan.
+
+    Parameters
+    ----------
+    model : DiscreteModel
+        Discrete model (12a) with ``casadi_step``, ``step``, ``jac_theta``, ``c_m``, ``W``.
+    theta0 : array (n,)
+        Initial state (K), eq. (20c): the estimate at t0.
+    t0 : float
+        Run time (s) of the first sample.
+    T_ref_fn : callable
+        T_ref(t) (K) of run time (s), e.g. :func:`twin.control.reference.reference_trajectory`.
+    cfg : FurnaceConfig
+        Weights g0, g1, beta and the smoothing width (``cfg.feedforward``), t_s.
+    warm_start : FeedforwardPlan, optional
+        A previous plan; its v(t) and u_c (or free inputs) start the iteration.
+    parametrized : bool
+        True: u_ff = sat(v_j u_c) (eq. 18); False: free inputs (Remark 4).
+    horizon : float, optional
+        OCP horizon (s); default beta * (transition end - t0) (section 4.1), at least
+        2 time constants of the fillet mean at the final temperature
+        (:func:`mean_time_constant`) so a late re-plan still covers the settling.
+    interval : float
+        Knot spacing of v (s), a multiple of t_s.
+    best_effort : bool
+        Return the last iterate (``success=False``) instead of raising when IPOPT fails.
+    max_iter, max_wall_s : int, float
+        IPOPT iteration and wall-time limits.
+    ipopt_options : dict, optional
+        Extra CasADi/IPOPT options (e.g. ``{"ipopt.print_level": 5}`` to debug).
+
+    Raises
+    ------
+    FeedforwardError
+        When IPOPT does not report success and ``best_effort`` is False.
+    """
+    return _solve_feedforward(model, theta0, t0, T_ref_fn, cfg, warm_start, parametrized, horizon,
+                              interval, best_effort, max_iter, max_wall_s, ipopt_options)
+
+
+def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_ref_fn: RefFn,
+                       cfg: FurnaceConfig, warm_start: FeedforwardPlan | None, parametrized: bool,
+                       horizon: float | None, interval: float, best_effort: bool, max_iter: int,
+                       max_wall_s: float, ipopt_options: dict[str, Any] | None) -> FeedforwardPlan:
+    ca = _ca()
+    wall0 = time.perf_counter()
+    fw = cfg.feedforward
+    t_s = model.t_s
+    th0 = np.asarray(theta0, float)
+    if th0.shape != (model.n,) or not np.all(np.isfinite(th0)):
+        raise ValueError(f"theta0 must be a finite vector of {model.n} temperatures")
+    substeps = max(1, int(round(interval / t_s)))
+    t_end = transition_end(T_ref_fn, t0, t_s)
+    T_final = float(np.asarray(T_ref_fn(np.array([t_end])), float)[0])
+    theta_lin = np.full(model.n, T_final)
+    u_mid = np.full(model.m, 0.5)
+    if horizon is None:
+        horizon = max(fw.beta * (t_end - t0), SETTLE_TIME_CONSTANTS * mean_time_constant(model, theta_lin, u_mid))
+    K = max(2, int(math.ceil(horizon / (substeps * t_s) - 1e-9)))
+    grid = _Grid(float(t0), t_s, substeps, K)
+    # Heun substeps: h |lambda_max| <= HEUN_STEP_LIMIT at the hottest state planned for
+    T_hot = max(T_final, float(np.max(np.asarray(T_ref_fn(grid.t_knots), float))), float(np.max(th0)))
+    lam = _fastest_rate(model, np.full(model.n, T_hot), u_mid)
+    n_heun = max(1, int(math.ceil(grid.dt * lam / HEUN_STEP_LIMIT)))
+
+    T_knots = np.asarray(T_ref_fn(grid.t_knots), float)
+    m = model.m
+    inputs: ScaledDistribution | FreeInputs
+    if parametrized:
+        inputs = ScaledDistribution(m, grid.K, fw.smoothing)
+        lbx = np.zeros(inputs.n_params)
+        eta = heating_efficiency(model, theta_lin)
+        ubx = np.concatenate([1.0 / eta, np.full(grid.K, V_MAX)])  # d_i <= 1 / eta_i from eta^T d = 1
+        x_init = _parametrized_guess(model, grid, n_heun, T_knots, th0, warm_start, eta, fw.smoothing)
+    else:
+        inputs = FreeInputs(m, grid.K)
+        lbx = np.zeros(inputs.n_params)
+        ubx = np.ones(inputs.n_params)
+        x_init = _free_guess(model, grid, n_heun, T_knots, th0, warm_start, fw.smoothing)
+    reg = np.full(inputs.n_params, INPUT_REGULARIZATION / grid.K)
+    if parametrized:
+        reg[:m] = 0.0  # the distribution d is fixed by eta^T d = 1; only v needs it
+    shooting = CoarseShooting(model, th0, grid.dt, n_heun, T_knots, _knot_weights(grid), fw.g0, fw.g1, inputs,
+                              reg)
+    x = ca.MX.sym("p", inputs.n_params)
+    if parametrized:
+        g = ca.dot(ca.DM(eta), x[:m])  # eta^T d = 1: fixes the scale of (v, d); see the module docstring
+        lbg, ubg = [1.0], [1.0]
+    else:
+        g = ca.MX(0, 1)
+        lbg, ubg = [], []
+    f_cb, grad_cb, hess_cb = casadi_objective(shooting, int(g.numel()))
+    opts = _ipopt_options(max_iter, max_wall_s, ipopt_options)
+    opts.update({"grad_f": grad_cb, "hess_lag": hess_cb})
+    solver = ca.nlpsol("feedforward", "ipopt", {"x": x, "f": f_cb(x), "g": g}, opts)
+    sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    status = str(stats.get("return_status", "unknown"))
+    success = bool(stats.get("success", False))
+    iterations = int(stats.get("iter_count", -1))
+    xopt = np.asarray(sol["x"], float).ravel()
+    if not success and not best_effort:
+        raise FeedforwardError(f"feedforward OCP failed: IPOPT status {status} after {iterations} iterations",
+                               status)
+
+    t_fine = grid.t_fine
+    warm: dict[str, Any] = {"t_knots": grid.t_knots, "parametrized": parametrized, "x": xopt,
+                            "n_heun": n_heun, "horizon": horizon, "sweeps": shooting.n_sweeps,
+                            "simulations": shooting.n_simulations}
+    u_c: Array | None
+    v_fine: Array | None
+    if parametrized:
+        d_opt = np.clip(xopt[:m], 0.0, None)
+        v_opt = np.clip(xopt[m:], 0.0, None)
+        scale = float(np.max(d_opt))
+        u_c = d_opt / scale  # max(u_c) = 1 (20d)
+        v_knots = v_opt * scale
+        v_fine = np.repeat(v_knots, substeps)  # v held over each OCP interval
+        u_ff = saturation(v_fine[:, None] * u_c[None, :])
+        warm.update(v=v_knots, u_c=u_c)
+    else:
+        u_c, v_fine = None, None
+        Uk_opt = np.clip(xopt.reshape(grid.K, m), 0.0, 1.0)
+        u_ff = np.repeat(Uk_opt, substeps, axis=0)
+        warm.update(U=Uk_opt)
+    theta_ref = simulate(model, th0, u_ff)
+    T_ref = np.asarray(T_ref_fn(t_fine), float)
+    T_mean = theta_ref @ np.asarray(model.c_m, float)
+    e = T_mean[1:] - T_ref[1:]
+    kappa = np.einsum("ij,jk,ik->i", theta_ref[1:], np.asarray(model.W, float), theta_ref[1:])
+    objective = float(np.mean(fw.g0 * e**2 + fw.g1 * kappa))
+    elapsed = time.perf_counter() - wall0
+    plan = FeedforwardPlan(
+        t=t_fine, u_ff=u_ff, theta_ref=theta_ref, T_ref=T_ref, T_mean=T_mean, status=status,
+        iterations=iterations, solve_s=elapsed, success=success, u_c=u_c, v=v_fine,
+        objective=objective, warm=warm,
+    )
+    log.info(
+        "feedforward (%s): %s in %d iterations, %.2f s, horizon %.0f s (%d knots, %d Heun substeps), "
+        "max |mean - T_ref| %.2f K",
+        "parametrized" if parametrized else "free", status, iterations, elapsed, horizon, grid.K + 1,
+        n_heun, plan.max_mean_error,
+    )
+    return plan
+
+
+def heating_efficiency(model: DiscreteDynamics, theta: Array) -> Array:
+    """eta_i = c_m^T dF/du_i / t_s: fillet-mean heating rate (K/s) per unit fraction of group i,
+    normalized to mean 1 (eqs. 12a, 19).  Used to normalize the distribution: eta^T d = 1."""
+    B = np.asarray(model.jac_u(theta, np.full(model.m, 0.5)), float) / model.t_s
+    eta = np.asarray(model.c_m, float) @ B
+    if np.any(eta <= 0):
+        raise FeedforwardError("a lamp group does not heat the fillet (c_m^T B_i <= 0)", "model")
+    return np.asarray(eta / eta.mean(), float)
+
+
+def _parametrized_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
+                        warm: FeedforwardPlan | None, eta: Array, width: float) -> Array:
+    """Initial (d, v) with eta^T d = 1.
+
+    d: the previous plan's distribution u_c (or its mean free inputs) if given, else
+    uniform inputs; v: the mean-tracking amplification for that d
+    (:func:`_tracking_amplification`).  Reusing the previous v(t) instead starts far
+    off after a reference change (it tracks the old reference), and IPOPT then needed
+    four times the iterations of a cold start.
+    """
+    if warm is not None and warm.u_c is not None:
+        d = np.asarray(warm.u_c, float)
+    elif warm is not None:
+        d = warm.u_ff.mean(axis=0) / max(float(warm.u_ff.mean(axis=0).max()), 1e-9)
+    else:
+        d = np.ones(model.m)
+    d = np.maximum(d, WARM_FLOOR)  # an interior start: IPOPT moves slowly off a bound
+    d = d / float(eta @ d)
+    v = _tracking_amplification(model, grid.dt, n_heun, T_knots, th0, d, width)
+    return np.concatenate([d, v])
+
+
+def _free_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
+                warm: FeedforwardPlan | None, width: float) -> Array:
+    """Initial free inputs (K, m) row-major: the previous plan's inputs on the new intervals
+    if given, else uniform mean-tracking inputs."""
+    if warm is not None:
+        t_mid = grid.t_knots[:-1] + 0.5 * grid.dt
+        tw = warm.t[:-1]
+        U = np.column_stack([np.interp(t_mid, tw, warm.u_ff[:, i]) for i in range(model.m)])
+        return np.clip(U, 0.0, 1.0).ravel()
+    ones = np.ones(model.m)
+    v = _tracking_amplification(model, grid.dt, n_heun, T_knots, th0, ones, width)
+    from twin.control.shooting import smooth_min1
+
+    return np.repeat(smooth_min1(v, width)[0][:, None], model.m, axis=1).ravel()
+
+
+def ocp_seconds(cfg: FurnaceConfig, radiation: Any) -> float:
+    """Benchmark ``ocp_s``: wall time (s) of the feedforward plan for a default run (product.md).
+
+    Default scenario (t_E = 120 s, setpoint, beta t_E horizon, t_s), fixed specimen,
+    cold start at the configured initial temperature.
+    """
+    from twin.control.reference import reference_trajectory
+    from twin.model.discrete import discrete_model
+    from twin.scenario import TransitionReference
+
+    model = discrete_model(cfg, radiation, None)
+    theta0 = np.full(model.n, cfg.specimen.initial_temperature)
+    ref = reference_trajectory(TransitionReference.model_validate({}), cfg.specimen.initial_temperature)
+    t = time.perf_counter()
+    plan = solve_feedforward(model, theta0, 0.0, ref, cfg, best_effort=True)
+    elapsed = time.perf_counter() - t
+    log.info("ocp_s = %.2f s (status %s, %d iterations)", elapsed, plan.status, plan.iterations)
+    return elapsed

@@ -1,0 +1,81 @@
+"""``furnace-twin bench``: the performance figures of product.md, measured in one process.
+
+| key | meaning |
+|---|---|
+| precompute_s | exchange factors for all eta positions, cold cache |
+| plant_rtf | simulated s per wall s, full-order plant with oscillation, open loop |
+| closed_loop_rtf | the same for plant + EKF + LQG over a whole run (feedforward solved) |
+| step_ms | EKF update + controller per sample, median |
+| ocp_s | feedforward OCP solve for a whole run |
+| replan_s | re-plan after a reference change, warm-started |
+| stream_* | dashboard stream figures (5 clients at real time; max speed with 2 clients) |
+
+Timing lives here, never in the test suite.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from twin.config import FurnaceConfig
+
+log = logging.getLogger(__name__)
+
+
+def closed_loop_figures(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> dict[str, float]:
+    """closed_loop_rtf over a whole default run (plan solved beforehand) and step_ms.
+
+    step_ms times the estimator (update + predict) and the controller per sample,
+    the part of a step the twin adds to the plant.
+    """
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    loop = ClosedLoop(cfg, Scenario(duration=duration), radiation)  # the OCP is solved here
+    t0 = time.perf_counter()
+    for _ in loop.run():
+        pass
+    wall = time.perf_counter() - t0
+    return {"closed_loop_rtf": duration / wall, "step_ms": float(np.median(loop.compute_ms))}
+
+
+def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True) -> dict[str, float]:
+    from twin.control.feedforward import ocp_seconds
+    from twin.control.replan import replan_seconds
+    from twin.furnace.simulated.plant import plant_rtf
+    from twin.radiation import radiation_model
+    from twin.radiation.cache import precompute_seconds
+
+    out: dict[str, float] = {}
+    log.info("bench: precompute (cold cache)")
+    out["precompute_s"] = precompute_seconds(cfg)
+    rad = radiation_model(cfg)
+    log.info("bench: plant")
+    out["plant_rtf"] = plant_rtf(cfg, rad)
+    log.info("bench: OCP and re-planning")
+    out["ocp_s"] = ocp_seconds(cfg, rad)
+    out["replan_s"] = replan_seconds(cfg, rad)
+    log.info("bench: closed loop")
+    out.update(closed_loop_figures(cfg, rad))
+    if include_stream:
+        from backend.bench import stream_bench
+
+        log.info("bench: dashboard stream")
+        out.update(stream_bench(cfg))
+    return out
+
+
+def bench_command(cfg: FurnaceConfig, args: Any) -> int:
+    figures = run_bench(cfg)
+    if args.json:
+        print(json.dumps(figures))  # noqa: T201
+    else:
+        for k, v in figures.items():
+            sys.stdout.write(f"{k:32s} {v:10.3f}\n")
+    return 0

@@ -1,0 +1,242 @@
+"""``furnace-twin simulate``: an open-loop run of the plant with constant or scheduled group powers.
+
+Writes ``timeseries.npz`` (t, eta, u (n, 6), tc (n, 4), tc_true, fillet_mean,
+inhomogeneity, t_field, field (m, N_y, N_x), x, y, L_s, W_s, tc_positions, group_names)
+and two PNGs: ``field.png`` (final field, fillet outline, TC markers) and ``tc.png``
+(the four TC traces, fillet mean, group powers, eta).
+
+Schedule file: JSON ``[[t, [u1, ..., u6]], ...]`` with increasing t (s); each entry holds
+from its time on (zero-order hold); before the first entry ``--powers`` applies.
+
+Example
+-------
+    furnace-twin simulate --powers 0.55 --duration 240 --oscillate --out out/sim
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import ValidationError
+
+from twin.config import FurnaceConfig
+from twin.scenario import MAX_DURATION_S, OscillationSpec
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+
+class SimulateArgumentError(ValueError):
+    """A bad ``simulate`` argument; the message says which and why."""
+
+
+def parse_powers(text: str, n_groups: int) -> Array:
+    """One fraction for every group, or ``n_groups`` comma-separated fractions, all in [0, 1]."""
+    try:
+        values = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise SimulateArgumentError(
+            f"--powers: expected numbers like 0.6 or 0.5,0.5,0.6,0.7,0.4,0.4, got {text!r}"
+        ) from None
+    if len(values) == 1:
+        values = values * n_groups
+    if len(values) != n_groups:
+        raise SimulateArgumentError(f"--powers: need 1 or {n_groups} values (one per group), got {len(values)}")
+    u = np.array(values, float)
+    if not np.all(np.isfinite(u)) or np.any(u < 0.0) or np.any(u > 1.0):
+        raise SimulateArgumentError("--powers: fractions of u_max must lie in [0, 1]")
+    return u
+
+
+def load_schedule(path: str, n_groups: int) -> tuple[Array, Array]:
+    """Times (k,) and powers (k, n_groups) of a schedule file (see the module docstring)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise SimulateArgumentError(f"--schedule: cannot read {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise SimulateArgumentError(f"--schedule: {path} is not valid JSON: {exc}") from None
+    if not isinstance(data, list) or not data:
+        raise SimulateArgumentError("--schedule: expected a non-empty list [[t, [u1..u6]], ...]")
+    times, powers = [], []
+    for i, entry in enumerate(data):
+        if not (isinstance(entry, list) and len(entry) == 2 and isinstance(entry[1], list)):
+            raise SimulateArgumentError(f"--schedule: entry {i} must look like [t, [u1, ..., u{n_groups}]]")
+        try:
+            t = float(entry[0])
+            u = parse_powers(",".join(str(v) for v in entry[1]), n_groups)
+        except (TypeError, ValueError) as exc:
+            raise SimulateArgumentError(f"--schedule: entry {i}: {exc}") from None
+        if len(entry[1]) != n_groups:
+            raise SimulateArgumentError(f"--schedule: entry {i} needs {n_groups} powers, got {len(entry[1])}")
+        times.append(t)
+        powers.append(u)
+    ts = np.array(times)
+    if ts[0] < 0 or np.any(np.diff(ts) <= 0):
+        raise SimulateArgumentError("--schedule: times must be >= 0 and strictly increasing")
+    return ts, np.array(powers)
+
+
+@dataclass(frozen=True)
+class OpenLoopRun:
+    """Samples of an open-loop run (every t_s; the field every ``field_every`` s)."""
+
+    t: Array
+    eta: Array
+    u: Array
+    tc: Array
+    tc_true: Array
+    fillet_mean: Array
+    inhomogeneity: Array
+    t_field: Array
+    field: Array
+
+
+def run_open_loop(
+    plant: Any,
+    u_of_t: Callable[[float], Array],
+    eta_of_t: Callable[[float], float],
+    duration: float,
+    thermocouples: Any,
+    rng: np.random.Generator,
+    noise: float,
+    field_every: float = 1.0,
+) -> OpenLoopRun:
+    """March the plant from its initial temperature, reading the TCs at every sample t_s."""
+    cfg = plant.cfg
+    dt = cfg.sampling.t_s
+    n = int(round(duration / dt))
+    every = max(1, int(round(field_every / dt)))
+    T = np.full(plant.n, cfg.specimen.initial_temperature)
+    t = np.arange(n + 1) * dt
+    eta = np.array([eta_of_t(v) for v in t])
+    u = np.empty((n + 1, plant.n_groups))
+    tc_true = np.empty((n + 1, thermocouples.H.shape[0]))
+    means = np.empty(n + 1)
+    inh = np.empty(n + 1)
+    t_field, fields = [], []
+    for j in range(n + 1):
+        u[j] = u_of_t(t[j])
+        tc_true[j] = thermocouples.true_values(T)
+        means[j] = plant.fillet_mean(T)
+        inh[j] = plant.fillet_inhomogeneity(T)
+        if j % every == 0 or j == n:
+            t_field.append(t[j])
+            fields.append(plant.field(T))
+        if j < n:
+            T = plant.step(T, u[j], t[j], dt, eta_of_t)
+    tc = tc_true + (noise * rng.standard_normal(tc_true.shape) if noise > 0 else 0.0)
+    return OpenLoopRun(t, eta, u, tc, tc_true, means, inh, np.array(t_field), np.array(fields))
+
+
+def _oscillation(cfg: FurnaceConfig, args: Any) -> OscillationSpec:
+    if not args.oscillate:
+        return OscillationSpec.model_validate({"enabled": False})
+    try:
+        spec = OscillationSpec.model_validate({"enabled": True, "amplitude": args.amplitude, "period": args.period})
+    except ValidationError as exc:
+        msgs = "; ".join(f"--{e['loc'][-1]}: {e['msg']}" for e in exc.errors())
+        raise SimulateArgumentError(msgs) from None
+    if spec.amplitude > cfg.oscillation.eta_max + 1e-12:
+        raise SimulateArgumentError(
+            f"--amplitude: {spec.amplitude} m exceeds the furnace's eta_max = {cfg.oscillation.eta_max} m"
+        )
+    return spec
+
+
+def simulate_command(cfg: FurnaceConfig, args: Any) -> int:
+    """Entry point of ``furnace-twin simulate`` (argument parsing lives in twin.cli)."""
+    from twin.furnace.simulated.plant import Plant
+    from twin.furnace.simulated.thermocouples import Thermocouples
+    from twin.physics.motion import eta_function
+    from twin.radiation import radiation_model
+    from twin.runs.figures_open_loop import plot_field, plot_tc_traces
+
+    try:
+        u_const = parse_powers(args.powers, cfg.n_groups)
+        if not (np.isfinite(args.duration) and 0 < args.duration <= MAX_DURATION_S):
+            raise SimulateArgumentError(f"--duration: must be in (0, {MAX_DURATION_S:g}] s, got {args.duration}")
+        spec = _oscillation(cfg, args)
+        sched = load_schedule(args.schedule, cfg.n_groups) if args.schedule else None
+    except SimulateArgumentError as exc:
+        print(f"furnace-twin simulate: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+
+    def u_of_t(t: float) -> Array:
+        if sched is None:
+            return u_const
+        k = int(np.searchsorted(sched[0], t + 1e-9, side="right")) - 1
+        return u_const if k < 0 else sched[1][k]
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rad = radiation_model(cfg, progress=True)
+    plant = Plant(cfg, rad)
+    positions = cfg.tc_positions(tuple(args.tc4))
+    tcs = Thermocouples(cfg, positions)
+    log.info("simulate: %.0f s open loop, oscillation %s", args.duration, "on" if spec.enabled else "off")
+    run = run_open_loop(
+        plant, u_of_t, eta_function(spec), args.duration, tcs, np.random.default_rng(args.seed), cfg.sensors.noise
+    )
+    names = [g.name for g in cfg.lamps.groups]
+    s = cfg.specimen
+    np.savez_compressed(
+        out / "timeseries.npz",
+        t=run.t,
+        eta=run.eta,
+        u=run.u,
+        tc=run.tc,
+        tc_true=run.tc_true,
+        fillet_mean=run.fillet_mean,
+        inhomogeneity=run.inhomogeneity,
+        t_field=run.t_field,
+        field=run.field,
+        x=plant.x_centers,
+        y=plant.y_centers,
+        L_s=s.length,
+        W_s=s.width,
+        tc_positions=np.array(positions),
+        group_names=np.array(names),
+    )
+    title = (
+        f"t = {run.t[-1]:.0f} s, fillet mean {run.fillet_mean[-1]:.0f} K, "
+        f"inhomogeneity {100 * run.inhomogeneity[-1] / run.fillet_mean[-1]:.1f} %"
+        + (f", eta = {1e3 * run.eta[-1]:.1f} mm" if spec.enabled else "")
+    )
+    plot_field(
+        out / "field.png",
+        run.field[-1],
+        plant.x_centers,
+        plant.y_centers,
+        s.length,
+        s.width,
+        cfg.fillet,
+        positions,
+        title=title,
+    )
+    plot_tc_traces(
+        out / "tc.png",
+        run.t,
+        run.tc,
+        run.fillet_mean,
+        run.u,
+        run.eta,
+        names,
+        title="open loop: " + ("oscillating" if spec.enabled else "fixed specimen"),
+    )
+    log.info(
+        "simulate: final fillet mean %.1f K, inhomogeneity %.1f K; wrote %s",
+        run.fillet_mean[-1],
+        run.inhomogeneity[-1],
+        out,
+    )
+    return 0

@@ -1,0 +1,124 @@
+"""Headless closed-loop runs: ``furnace-twin run`` (product.md).
+
+A run writes ``metrics.json``, ``timeseries.npz``, PNG figures and, when a sink
+factory is given by the composition root (``twin/cli.py`` passes the rerun
+recorder from ``backend``), ``recording.rrd``.  ``twin`` itself never imports
+rerun.  The time series is flushed every ``flush_every_s`` simulated seconds and
+on stop or error, so a crash loses at most those seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import sys
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, Protocol
+
+from pydantic import ValidationError
+
+from twin.config import FurnaceConfig
+from twin.runs.loop import ClosedLoop, Snapshot, save_timeseries
+from twin.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+
+class SnapshotSink(Protocol):
+    """Consumes snapshots of one run (a rerun recording, a viser scene, ...)."""
+
+    def add(self, snap: Snapshot) -> None: ...
+
+    def flush(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+SinkFactory = Callable[[Path, ClosedLoop], SnapshotSink]
+
+
+class ScenarioError(ValueError):
+    """A scenario file or option is invalid; the message says which field and why."""
+
+
+def load_scenario(path: str | None, *, oscillate: bool = False, tc4: tuple[float, float] | None = None) -> Scenario:
+    """Read a scenario JSON file (or the defaults) and apply command-line overrides."""
+    data: dict[str, Any] = {}
+    if path is not None:
+        try:
+            data = json.loads(Path(path).read_text())
+        except OSError as exc:
+            raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
+        except json.JSONDecodeError as exc:
+            raise ScenarioError(f"scenario {path} is not valid JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise ScenarioError(f"scenario {path} must be a JSON object")
+    if oscillate:
+        data["oscillation"] = {**data.get("oscillation", {}), "enabled": True}
+    if tc4 is not None:
+        data["tc4"] = list(tc4)
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        msgs = [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()]
+        raise ScenarioError("invalid scenario:\n  " + "\n  ".join(msgs)) from None
+
+
+def execute_run(
+    loop: ClosedLoop,
+    out: Path,
+    *,
+    sink_factories: Iterable[SinkFactory] = (),
+    figures: bool = True,
+    flush_every_s: float = 10.0,
+) -> dict[str, Any]:
+    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
+    sinks = [make(out, loop) for make in sink_factories]
+    flush_every = max(1, int(round(flush_every_s / loop.t_s)))
+    try:
+        for snap in loop.run():
+            for sink in sinks:
+                sink.add(snap)
+            if snap.j % flush_every == 0 and snap.j > 0:
+                save_timeseries(out / "timeseries.npz", loop.timeseries())
+                for sink in sinks:
+                    sink.flush()
+    finally:
+        ts = loop.timeseries()
+        save_timeseries(out / "timeseries.npz", ts)
+        for sink in sinks:
+            sink.close()
+        loop.close()
+    metrics = loop.metrics()
+    (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
+    if figures:
+        from twin.runs.figures import plot_run
+
+        plot_run(ts, out)
+    return {**metrics, "out": str(out)}
+
+
+def _json_safe(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
+    """``furnace-twin run``: one closed-loop run from a scenario file."""
+    try:
+        scenario = load_scenario(args.scenario, oscillate=args.oscillate, tc4=args.tc4)
+    except ScenarioError as exc:
+        print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    out = Path(args.out)
+    log.info("run: %s -> %s", scenario.to_json(), out)
+    result = execute_run(ClosedLoop(cfg, scenario), out, sink_factories=sink_factories)
+    if args.json:
+        print(json.dumps(_json_safe(result)))  # noqa: T201
+    else:
+        for k, v in result.items():
+            log.info("%-36s %s", k, f"{v:.4f}" if isinstance(v, float) else v)
+    return 0
