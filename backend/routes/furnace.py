@@ -6,6 +6,7 @@ from fastapi import APIRouter
 
 from backend.deps import ManagerDep
 from backend.schemas import FurnaceOut, LampGroupOut
+from twin.physics.grid import cell_centers
 from twin.scenario import parse_scenario
 
 router = APIRouter(prefix="/api", tags=["furnace"])
@@ -17,11 +18,11 @@ def furnace(manager: ManagerDep) -> FurnaceOut:
     (``twin.limits``: the furnace's, within this server's run length and speed)."""
     cfg, limits = manager.cfg, manager.limits
     s, lamps = cfg.specimen, cfg.lamps
+    x, y = cell_centers(cfg)
     return FurnaceOut(
         name=limits.furnace,
         L_s=s.length, W_s=s.width, B_s=s.thickness, nx=s.nx, ny=s.ny,
-        x=[(i + 0.5) * s.length / s.nx for i in range(s.nx)],
-        y=[(j + 0.5) * s.width / s.ny for j in range(s.ny)],
+        x=x.tolist(), y=y.tolist(),
         fillet=list(cfg.fillet),
         eta_max=cfg.oscillation.eta_max,
         t_s=cfg.sampling.t_s,
