@@ -5,7 +5,7 @@ import { render, startRendering } from "./charts.js";
 import { wireForms } from "./forms.js";
 import { applyLimits } from "./inputs.js";
 import { $, LIVE } from "./page.js";
-import { refreshHistory, refreshRun, selectRun } from "./runs.js";
+import { refreshHistory, refreshRun, selectRun, wireHistory } from "./runs.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
 
@@ -14,6 +14,7 @@ window.state = state; // the page's state, for the browser console and the brows
 async function init() {
   forgetOldToken();
   wireForms();
+  wireHistory();
   try {
     [state.health, state.furnace] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace")]);
     applyLimits(state.furnace);

@@ -82,21 +82,29 @@ function markSelected() {
   for (const tr of document.querySelectorAll("#history tbody tr")) tr.classList.toggle("sel", tr.dataset.id === state.runId);
 }
 
+// The rows are rebuilt only when a run's row changed, so a click never races a refresh.
+let historyHtml = null;
+
 export async function refreshHistory() {
   let runs = [];
   try { runs = await api("GET", "/api/runs?limit=50"); } catch (e) { return; }
-  const tb = document.querySelector("#history tbody");
-  tb.innerHTML = "";
-  for (const r of runs) {
-    const tr = document.createElement("tr");
-    tr.dataset.id = r.id;
+  const html = runs.map((r) => {
     const m = r.metrics || {};
-    tr.innerHTML = `<td title="${new Date(r.created_at * 1000).toLocaleString()}">${r.id.slice(0, 6)}${r.scenario.oscillation.enabled ? " ↕" : ""}</td>
+    return `<tr data-id="${r.id}"><td title="${new Date(r.created_at * 1000).toLocaleString()}">${r.id.slice(0, 6)}${r.scenario.oscillation.enabled ? " ↕" : ""}</td>
       <td><span class="badge ${r.status}" style="color:#fff">${r.status}</span></td>
       <td class="num">${pct(m.mean_error_steady_max)}</td><td class="num">${pct(m.inhomogeneity_steady)}</td>
-      <td><a href="${r.links.recording}" title="rerun recording" download>rrd</a><a href="${r.links.timeseries}" title="raw time series" download>npz</a></td>`;
-    tr.addEventListener("click", (ev) => { if (ev.target.tagName !== "A") selectRun(r.id); });
-    tb.appendChild(tr);
+      <td><a href="${r.links.recording}" title="rerun recording" download>rrd</a><a href="${r.links.timeseries}" title="raw time series" download>npz</a></td></tr>`;
+  }).join("");
+  if (html !== historyHtml) {
+    document.querySelector("#history tbody").innerHTML = html;
+    historyHtml = html;
   }
   markSelected();
+}
+
+export function wireHistory() {
+  document.querySelector("#history tbody").addEventListener("click", (ev) => {
+    const tr = ev.target.closest("tr");
+    if (tr && ev.target.tagName !== "A") selectRun(tr.dataset.id);
+  });
 }
