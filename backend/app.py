@@ -4,9 +4,12 @@ One router per resource (``backend/routes``): health, furnace, runs, run files, 
 the dashboard's page and files.  Everything they need comes from typed dependencies
 (``backend/deps.py``); the run manager is the only way to the runs.
 
->>> from backend.app import create_app
+>>> import tempfile
 >>> from backend.settings import Settings
->>> app = create_app(Settings(data_dir="/tmp/furnace-doc"))  # doctest: +SKIP
+>>> from twin.config import small_config
+>>> app = create_app(Settings(data_dir=tempfile.mkdtemp()), small_config())
+>>> sorted(set(app.openapi()["paths"]) & {"/api/runs", "/api/health"})
+['/api/health', '/api/runs']
 """
 
 from __future__ import annotations
