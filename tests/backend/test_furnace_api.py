@@ -8,12 +8,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import fake_factory, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import free_port
+from conftest import fake_factory, wait_status
 from twin.config import load_config
 from twin.limits import furnace_name
 
