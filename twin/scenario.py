@@ -165,6 +165,53 @@ class Mismatch(_Model):
     lamp_efficiency: float = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
 
 
+FaultKind = Literal["stuck", "drift", "offset", "dropout", "failed", "derate"]
+_VALUE_RANGE = {"drift": lim.FAULT_DRIFT, "offset": lim.FAULT_OFFSET, "derate": lim.FAULT_DERATE}
+
+
+class FaultSpec(_Model):
+    """A fault injected into the simulated furnace at run time ``at`` (product.md, ``faults``).
+
+    TC1..TC4: ``stuck`` (reads the value it had at ``at``), ``drift`` (``value`` K/s added from ``at``),
+    ``offset`` (``value`` K added), ``dropout`` (no reading: status "bad").  A lamp group (a name of
+    ``GET /api/furnace``'s groups): ``failed`` (no power), ``derate`` (keeps the fraction ``value``).
+    In ``PUT /api/runs/{id}/faults``, ``at`` counts from now.
+    """
+
+    at: float = Field(lim.FAULT_AT.default, ge=lim.FAULT_AT.lo, le=lim.FAULT_AT.hi,
+                      description="s of run time (of a PUT: from now)")
+    target: str = Field(description="TC1..TC4, or a lamp group name (GET /api/furnace)")
+    kind: FaultKind
+    value: float | None = Field(None, description="drift K/s, offset K, derate fraction kept; "
+                                                  "none for stuck, dropout, failed")
+
+    @model_validator(mode="after")
+    def _consistent(self, info: ValidationInfo) -> FaultSpec:
+        groups = _limits(info).groups
+        on_tc = self.kind in lim.TC_FAULT_KINDS
+        if on_tc and self.target not in lim.TC_NAMES:
+            raise ValueError(f"target: a {self.kind} fault needs a thermocouple {'/'.join(lim.TC_NAMES)}, "
+                             f"got {self.target!r}")
+        if not on_tc and self.target not in groups:
+            raise ValueError(f"target: a {self.kind} fault needs a lamp group of this furnace "
+                             f"({', '.join(groups)}), got {self.target!r}")
+        r = _VALUE_RANGE.get(self.kind)
+        if r is None and self.value is not None:
+            raise ValueError(f"value: a {self.kind} fault takes no value")
+        if r is not None:
+            if self.value is None:
+                raise ValueError(f"value: a {self.kind} fault needs a value ({r.unit or 'fraction kept'})")
+            problem = r.problem(self.value)
+            if problem is not None:
+                raise ValueError(f"value: {problem}")
+        return self
+
+    def describe(self) -> str:
+        """E.g. 'TC2 drift 0.5 K/s', 'T3h failed'."""
+        unit = {"drift": " K/s", "offset": " K", "derate": " kept"}.get(self.kind, "")
+        return f"{self.target} {self.kind}" + ("" if self.value is None else f" {self.value:g}{unit}")
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: float = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
@@ -175,6 +222,8 @@ class Scenario(_Model):
     tc_noise: float = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
     seed: int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
+    faults: list[FaultSpec] = Field(default_factory=list, max_length=lim.MAX_FAULTS,
+                                    description="faults injected into the simulated furnace at run time")
 
     @model_validator(mode="before")
     @classmethod
@@ -208,6 +257,7 @@ class Scenario(_Model):
 
 
 _REFERENCE: TypeAdapter[Reference] = TypeAdapter(Reference)
+_FAULTS: TypeAdapter[list[FaultSpec]] = TypeAdapter(Annotated[list[FaultSpec], Field(max_length=lim.MAX_FAULTS)])
 
 
 def parse_scenario(data: Any, limits: ScenarioLimits | None = None) -> Scenario:
@@ -224,6 +274,11 @@ def parse_oscillation(data: Any, limits: ScenarioLimits | None = None) -> Oscill
 def parse_reference(data: Any, limits: ScenarioLimits | None = None) -> TransitionReference | PointsReference:
     """A reference (``PUT .../reference``) checked against ``limits``, as :func:`parse_scenario`."""
     return _REFERENCE.validate_python(data, context={"limits": limits or _DEFAULT})
+
+
+def parse_faults(data: Any, limits: ScenarioLimits | None = None) -> list[FaultSpec]:
+    """A fault list (``PUT .../faults``) checked against ``limits`` (TC names, the furnace's lamp groups)."""
+    return _FAULTS.validate_python(data, context={"limits": limits or _DEFAULT})
 
 
 def check(value: Scenario | OscillationSpec | TransitionReference | PointsReference, limits: ScenarioLimits) -> None:

@@ -31,10 +31,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import Motion, Readings
+from twin.furnace.simulated.faults import FaultInjector
 from twin.furnace.simulated.plant import Plant
 from twin.furnace.simulated.thermocouples import Thermocouples
 from twin.physics.motion import eta_function
-from twin.scenario import Mismatch, OscillationSpec, Scenario
+from twin.scenario import FaultSpec, Mismatch, OscillationSpec, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,7 @@ class SimulatedFurnace:
     seed : of the TC noise
     oscillation : the drive's settings at t = 0
     T0 : initial cell temperatures (K); default the configured uniform initial temperature
+    faults : faults injected at run time (:mod:`twin.furnace.simulated.faults`)
     """
 
     kind = "simulated"
@@ -69,6 +71,7 @@ class SimulatedFurnace:
         seed: int = 0,
         oscillation: OscillationSpec | None = None,
         T0: ArrayLike | None = None,
+        faults: Sequence[FaultSpec] = (),
     ) -> None:
         self.cfg = cfg
         self.plant = Plant(cfg, radiation, mismatch)
@@ -81,12 +84,13 @@ class SimulatedFurnace:
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
+        self.faults = FaultInjector(tuple(g.name for g in cfg.lamps.groups), faults)
 
     @classmethod
     def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any) -> SimulatedFurnace:
-        """The furnace of a scenario: its mismatch, TC4, TC noise, seed and initial oscillation."""
+        """The furnace of a scenario: its mismatch, TC4, TC noise, seed, initial oscillation and faults."""
         return cls(cfg, radiation, mismatch=scenario.mismatch, tc4=scenario.tc4, tc_noise=scenario.tc_noise,
-                   seed=scenario.seed, oscillation=scenario.oscillation)
+                   seed=scenario.seed, oscillation=scenario.oscillation, faults=scenario.faults)
 
     # ---- the Furnace protocol
     @property
@@ -107,16 +111,28 @@ class SimulatedFurnace:
             raise ValueError(f"{what} at t = {t:.6g} s, but the simulated furnace is at t = {self._state.t:.6g} s")
 
     def read(self, t: float) -> Readings:
-        """TC1..TC4 at the plant's current time t: bilinear in the field plus N(0, tc_noise^2) (section 3.2)."""
+        """TC1..TC4 at the plant's current time t: bilinear in the field plus N(0, tc_noise^2) (section 3.2),
+        as the injected faults leave them."""
         self._check_time(t, "read")
-        values = self.thermocouples.read(self._state.T, self._rng, self._tc_noise)
-        return Readings(values=values, timestamps=np.full(len(values), float(t)),
-                        status=tuple("good" for _ in values))
+        values, status = self.faults.readings(t, self.thermocouples.read(self._state.T, self._rng, self._tc_noise))
+        return Readings(values=values, timestamps=np.full(len(values), float(t)), status=status)
 
     def apply(self, u: Array, t: float) -> None:
-        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1])."""
+        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]; a failed or
+        derated lamp group delivers less)."""
         self._check_time(t, "apply")
-        self._state = self.plant.advance(self._state, u, self.t_s, self._eta_of_t)
+        self._state = self.plant.advance(self._state, self.faults.delivered(t, u), self.t_s, self._eta_of_t)
+
+    # ---- fault injection (twin.furnace.interface.FaultInjectable)
+    def set_faults(self, faults: Sequence[FaultSpec], t: float) -> None:
+        """Replace the injected faults from run time t on (their ``at`` counted from t; empty clears them)."""
+        self.faults.schedule(faults, t)
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        return self.faults.in_force()
+
+    def take_fault_events(self) -> list[str]:
+        return self.faults.take_events()
 
     def motion(self, t: float) -> Motion:
         return Motion(eta=float(self._eta_of_t(t)), oscillation=self._oscillation, since=self._since)
