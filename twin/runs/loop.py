@@ -39,20 +39,20 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
-from twin.furnace.interface import Furnace, Readings
+from twin.furnace.interface import FaultInjectable, Furnace, Readings
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
 from twin.runs.record import RunHeader, RunRecord, Snapshot
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -62,11 +62,15 @@ __all__ = ["ClosedLoop", "Snapshot"]
 
 @dataclass(frozen=True)
 class _Plan:
-    """What depends on the model variant (fixed / averaged) and the reference: immutable, shareable."""
+    """What depends on the model variant (fixed / averaged), the lamps' state and the reference: immutable,
+    shareable.  ``model`` is the controller's (lamp groups scaled by what they are believed to deliver),
+    ``nominal`` the same without faults (the estimator's and the fault detector's)."""
 
     model: Any
     plan: Any
     gains: Any
+    nominal: Any = None
+    note: str = ""
 
 
 @dataclass
@@ -101,6 +105,7 @@ class ClosedLoop:
     ) -> None:
         from twin.control.lqg import Controller
         from twin.estimation.ekf import Estimator
+        from twin.estimation.fault_detection import FaultDetector
         from twin.radiation import radiation_model
 
         self.cfg = cfg
@@ -118,6 +123,7 @@ class ClosedLoop:
         self._pending: _Pending | None = None
         self._events: list[str] = []
         self._oscillation = scenario.oscillation
+        self._lamp_gains = np.ones(cfg.n_groups)  # believed fraction of each group's power (fault detection)
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
@@ -136,7 +142,8 @@ class ClosedLoop:
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
-        self.estimator = Estimator(self._ctl.model, cfg, theta0)
+        self.estimator = Estimator(self._ctl.nominal, cfg, theta0)
+        self.detector = FaultDetector(cfg, self._ctl.nominal)
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -180,13 +187,34 @@ class ClosedLoop:
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
-        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
-        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous)
+        nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
+        gains_now = self._lamp_gains.copy()
+        faulty = bool(np.any(gains_now < 1.0))
+        model = replace(nominal, B=nominal.B * gains_now[None, :]) if faulty else nominal
+        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, best_effort=faulty)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Plan(model, plan, gains)
+        return _Plan(model, plan, gains, nominal, self._reach_note(model, ref_fn) if faulty else "")
+
+    def _reach_note(self, model: Any, ref_fn: Callable[[Any], Any]) -> str:
+        """What the lamp groups left can hold (fillet mean at full power) against the reference's end."""
+        from twin.control.reference import reachable_range
+
+        names = [g.name for g in self.cfg.lamps.groups]
+        lost = ", ".join(f"{n} {'failed' if k == 0 else f'at {k:.0%}'}" for n, k in zip(names, self._lamp_gains,
+                                                                                        strict=True) if k < 1.0)
+        try:
+            top = reachable_range(model, self.cfg)[1]
+        except Exception as exc:  # no steady state at full power: say so, keep the plan
+            return f"with {lost}: the reachable fillet mean is unknown ({exc})"
+        T_end = float(np.max(self._ref_samples[self.j:])) if self.j < len(self._ref_samples) else float(
+            np.asarray(ref_fn(np.array([self.j * self.t_s])))[0])
+        if T_end > top:
+            return (f"with {lost} the groups left hold at most {top:.0f} K (fillet mean): the reference's "
+                    f"{T_end:.0f} K is out of reach")
+        return f"with {lost} the groups left hold up to {top:.0f} K: the reference ({T_end:.0f} K) stays reachable"
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> None:
@@ -223,10 +251,13 @@ class ClosedLoop:
 
     def _install(self, ctl: _Plan, description: str) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over."""
+        motion_changed = ctl.nominal.oscillation != self._ctl.nominal.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
-        self.estimator.set_model(ctl.model)
-        self._events.append(f"re-planned ({description}): {ctl.plan.status}")
+        self.estimator.set_model(ctl.nominal)
+        if motion_changed:
+            self.detector.set_model(ctl.nominal)
+        self._events.append(f"re-planned ({description}): {ctl.plan.status}" + (f"; {ctl.note}" if ctl.note else ""))
 
     def _poll_pending(self) -> None:
         p = self._pending
@@ -260,9 +291,14 @@ class ClosedLoop:
             readings = self._readings if self._readings is not None else self.furnace.read(t)
             self._readings = None
             eta = self.furnace.motion(t).eta
+            if isinstance(self.furnace, FaultInjectable):  # the furnace's own account, for the record only
+                self._events.extend(self.furnace.take_fault_events())
             c0 = time.perf_counter()
-            state = self.estimator.update(readings.for_estimator())  # eq. 13 (faulty readings gated inside)
+            y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)
+            theta_prior = self.estimator.state.theta
+            state = self.estimator.update(y)  # eq. 13 (faulty readings gated inside)
             theta = state.theta
+            self._on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
@@ -286,10 +322,35 @@ class ClosedLoop:
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimator.predict(snap.u)
+            self.estimator.predict(self._lamp_gains * snap.u)  # what the lamps are believed to deliver
+            self.detector.predict(snap.u, theta, self.estimator.state.theta)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap
+
+    def _on_detections(self, t: float, detections: Sequence[Any]) -> None:
+        """Report the detector's decisions; a lamp group's new state re-plans the feedforward without it."""
+        for d in detections:
+            self._events.append(f"fault detected: {d.text}")
+        lamps = [d for d in detections if d.target not in ("TC1", "TC2", "TC3", "TC4")]
+        if lamps:
+            self._lamp_gains = self.detector.lamp_gains.copy()
+            what = ", ".join(f"{d.target} {d.kind}" for d in lamps)
+            self._start_replan(self._oscillation, f"lamp group {what} at t = {t:.1f} s")
+
+    def set_faults(self, faults: Sequence[FaultSpec]) -> None:
+        """Inject ``faults`` into the furnace from the next sample on (``at`` counts from then; empty clears).
+
+        Raises ValueError for a furnace that faults cannot be injected into (a real one).
+        """
+        if not isinstance(self.furnace, FaultInjectable):
+            raise ValueError(f"faults can be injected only into a simulated furnace, not a {self.furnace.kind} one")
+        with self._lock:
+            self.furnace.set_faults(faults, self.j * self.t_s)
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        """The faults injected into the furnace (``at`` in run time); none for a real furnace."""
+        return self.furnace.faults_in_force() if isinstance(self.furnace, FaultInjectable) else []
 
     def run(self) -> Iterator[Snapshot]:
         while not self.done:
