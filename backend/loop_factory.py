@@ -1,10 +1,18 @@
-"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model."""
+"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model.
+
+The radiation model (exchange factors, ray-traced once per furnace and cached on disk) is loaded in a
+background thread as soon as the server starts (:meth:`DefaultLoopFactory.start_warm_up`); until it is
+ready the server answers everything at once, ``GET /api/health`` reports ``"radiation": "computing"``
+with the progress, and new runs wait in the status ``queued`` (backend.run_manager).
+"""
 
 from __future__ import annotations
 
 import logging
 import threading
-from typing import Any
+import time
+from dataclasses import dataclass, replace
+from typing import Any, Literal
 
 from backend.run_worker import LoopLike
 from twin.config import FurnaceConfig
@@ -12,22 +20,116 @@ from twin.scenario import Reference, Scenario
 
 log = logging.getLogger(__name__)
 
+RadiationState = Literal["computing", "ready", "failed"]
+
+
+@dataclass(frozen=True)
+class WarmUpStatus:
+    """Where the radiation model of one furnace stands."""
+
+    state: RadiationState
+    stage: str  # "waiting", "loading the cache", "ray tracing", "building the model", "ready", "failed"
+    done: int = 0  # positions ray-traced (of ``total``); total once loaded from the cache
+    total: int = 0
+    started: float = 0.0  # time.monotonic() at the start
+    finished: float | None = None
+    error: str | None = None
+
+    @property
+    def fraction(self) -> float:
+        if self.state == "ready":
+            return 1.0
+        return self.done / self.total if self.total else 0.0
+
+    @property
+    def elapsed_s(self) -> float:
+        return (self.finished if self.finished is not None else time.monotonic()) - self.started
+
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
+        self._status: dict[str, WarmUpStatus] = {}
+        self._ready: dict[str, threading.Event] = {}
+        self._status_lock = threading.Lock()
 
+    # ---- warm-up ----
+    def _event(self, key: str) -> threading.Event:
+        with self._status_lock:
+            return self._ready.setdefault(key, threading.Event())
+
+    def _set(self, key: str, **changes: Any) -> None:
+        with self._status_lock:
+            self._status[key] = replace(self._status[key], **changes)
+
+    def start_warm_up(self, cfg: FurnaceConfig) -> None:
+        """Load (or ray-trace) the radiation model of ``cfg`` in a daemon thread; idempotent."""
+        key = cfg.digest()
+        with self._status_lock:
+            if key in self._status:
+                return
+            self._status[key] = WarmUpStatus("computing", "waiting", started=time.monotonic())
+        threading.Thread(target=self._warm_up, args=(cfg,), name="radiation-warm-up", daemon=True).start()
+
+    def _warm_up(self, cfg: FurnaceConfig) -> None:
+        key = cfg.digest()
+        try:
+            self.radiation(cfg)
+            self._set(key, stage="building the model")
+            self.reachable_range(cfg)
+            self._set(key, state="ready", stage="ready", finished=time.monotonic())
+            log.info("radiation model ready (%.1f s)", self._status[key].elapsed_s)
+        except Exception as exc:
+            log.exception("loading the radiation model failed; runs will retry")
+            self._set(key, state="failed", stage="failed", error=f"{type(exc).__name__}: {exc}",
+                      finished=time.monotonic())
+        finally:
+            self._event(key).set()
+
+    def warm_up_status(self, cfg: FurnaceConfig) -> WarmUpStatus:
+        """The radiation model's state: ``ready`` once loaded (also when it was loaded without a warm-up)."""
+        key = cfg.digest()
+        with self._status_lock:
+            st = self._status.get(key)
+        if st is None:
+            return WarmUpStatus("ready" if key in self._radiation else "computing",
+                                "ready" if key in self._radiation else "waiting")
+        return st
+
+    def ready(self, cfg: FurnaceConfig) -> bool:
+        """True when a run can be built without waiting for the radiation model."""
+        return cfg.digest() in self._radiation and self.warm_up_status(cfg).state != "computing"
+
+    def wait_ready(self, cfg: FurnaceConfig, timeout: float) -> bool:
+        """Block until the warm-up of ``cfg`` ended (ready or failed) or ``timeout`` s passed."""
+        if self.ready(cfg):
+            return True
+        key = cfg.digest()
+        with self._status_lock:
+            started = key in self._status
+        if not started:
+            self.start_warm_up(cfg)
+        return self._event(key).wait(timeout)
+
+    # ---- the model ----
     def radiation(self, cfg: FurnaceConfig) -> Any:
         from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
 
         key = cfg.digest()
         with self._lock:
             if key not in self._radiation:
-                self._radiation[key] = radiation_model(cfg)
+                if key in self._status:
+                    self._set(key, stage="loading the cache")
+
+                def traced(done: int, total: int) -> None:
+                    if key in self._status:
+                        self._set(key, stage="ray tracing", done=done, total=total)
+
+                self._radiation[key] = radiation_model(cfg, on_position=traced)
             return self._radiation[key]
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:

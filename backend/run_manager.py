@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import json
 import logging
 import time
 import uuid
@@ -34,7 +35,7 @@ from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
 from twin.config import FurnaceConfig
 from twin.limits import ScenarioLimits, scenario_limits
-from twin.scenario import OscillationSpec, Reference, Scenario, check
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, check, parse_faults
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -54,6 +55,10 @@ class TooManyRuns(RuntimeError):
     """``max_concurrent_runs`` runs are already going (429)."""
 
 
+class _StoppedWhileQueued(Exception):
+    """A run stopped before its model was ready (it ends ``stopped`` with no data)."""
+
+
 class LimitExceeded(ValueError):
     """The scenario asks for more than the furnace or the server allows (amplitude, run length, speed) (422)."""
 
@@ -69,17 +74,25 @@ class LiveSample:
 
 @dataclass(frozen=True)
 class InForce:
-    """The reference and oscillation a run uses now (after live changes), as JSON objects."""
+    """The reference, oscillation and injected faults a run uses now (after live changes), as JSON."""
 
     reference: dict[str, Any]
     oscillation: dict[str, Any]
+    faults: list[dict[str, Any]] = field(default_factory=list)  # ``at`` in run time
 
 
 def in_force(scenario: dict[str, Any], changes: list[ChangeRow]) -> InForce:
-    """The scenario's reference and oscillation, replaced by each applied change in turn (an ended run)."""
-    current = {"reference": scenario.get("reference") or {}, "oscillation": scenario.get("oscillation") or {}}
+    """The scenario's reference, oscillation and faults, replaced by each applied change in turn (an ended run)."""
+    current: dict[str, Any] = {"reference": scenario.get("reference") or {},
+                               "oscillation": scenario.get("oscillation") or {},
+                               "faults": list(scenario.get("faults") or [])}
     for ch in changes:
-        if ch.status == "applied" and ch.kind in current:
+        if ch.status != "applied":
+            continue
+        if ch.kind == "faults":
+            t = ch.applied_t or 0.0
+            current["faults"] = [{**f, "at": float(f.get("at", 0.0)) + t} for f in ch.body.get("faults", [])]
+        elif ch.kind in current:
             current[ch.kind] = ch.body
     return InForce(**current)
 
@@ -125,6 +138,8 @@ class RunManager:
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
         self._shutting_down = False
+        #: where runs stream their recording live (``--rerun-connect``, or the server's rerun web viewer)
+        self.live_url: str | None = settings.rerun_connect
 
     def files(self, run_id: str) -> RunFiles:
         return RunFiles(self.settings.runs_dir / run_id)
@@ -146,15 +161,32 @@ class RunManager:
         if problems:
             raise LimitExceeded("; ".join(problems))
 
-    async def start(self, scenario: Scenario) -> str:
-        """Register and launch a run; returns its id."""
-        self.check_limits(scenario)
+    def model_ready(self) -> bool:
+        """The loop factory can build a run now (its radiation model is loaded); a factory without a
+        warm-up is always ready."""
+        ready = getattr(self.loop_factory, "ready", None)
+        return True if not callable(ready) else bool(ready(self.cfg))
+
+    def warm_up(self) -> Any:
+        """The radiation model's :class:`backend.loop_factory.WarmUpStatus`; ``None`` for a factory without one."""
+        status = getattr(self.loop_factory, "warm_up_status", None)
+        return status(self.cfg) if callable(status) else None
+
+    async def _check_reference(self, reference: Reference) -> None:
         check = getattr(self.loop_factory, "check_reference", None)
-        if callable(check):  # off the event loop: the first call may load the radiation model
+        if callable(check):  # off the event loop
             try:
-                await asyncio.to_thread(check, self.cfg, scenario.reference)
+                await asyncio.to_thread(check, self.cfg, reference)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
+
+    async def start(self, scenario: Scenario) -> str:
+        """Register and launch a run; returns its id at once.  While the radiation model warms up the run
+        waits as ``queued`` (its reference is checked when the model is ready: an unreachable one ends it
+        in ``error``); afterwards an unreachable reference is a :class:`LimitExceeded` here."""
+        self.check_limits(scenario)
+        if self.model_ready():
+            await self._check_reference(scenario.reference)
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -165,7 +197,8 @@ class RunManager:
         files.folder.mkdir(parents=True, exist_ok=True)
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
-        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory)
+        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
+                           live_url=self.live_url)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
@@ -203,6 +236,9 @@ class RunManager:
         final = "finished"
         error: str | None = None
         try:
+            if not await self._wait_for_model(run):
+                raise _StoppedWhileQueued
+            await self._check_reference(w.scenario.reference)
             self._set_status(run_id, run, "starting")
             await aio.run_in_executor(run.executor, w.build)
             self._set_status(run_id, run, "running")
@@ -238,6 +274,11 @@ class RunManager:
                         pass
                 else:
                     await asyncio.sleep(0)  # let the websockets send
+        except _StoppedWhileQueued:
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down before the run started" if self._shutting_down else None
+        except LimitExceeded as exc:  # the reference, checked once the model was ready
+            final, error = "error", str(exc)
         except asyncio.CancelledError:
             final = "interrupted"
             error = "the server shut down during the run"
@@ -266,6 +307,22 @@ class RunManager:
             self._runs.pop(run_id, None)
             log.info("run %s %s", run_id, final)
 
+    async def _wait_for_model(self, run: ActiveRun) -> bool:
+        """Wait (as ``queued``) until the radiation model is ready; False if the run was stopped meanwhile."""
+        if self.model_ready():
+            return True
+        wait = getattr(self.loop_factory, "wait_ready", None)
+        log.info("run waits for the radiation model")
+        while not run.worker.stop_requested.is_set():
+            if callable(wait):
+                if await asyncio.to_thread(wait, self.cfg, 0.25):
+                    return True
+            elif self.model_ready():
+                return True
+            else:
+                await asyncio.sleep(0.25)
+        return False
+
     # ---- control ----
     def _active(self, run_id: str) -> ActiveRun:
         run = self._runs.get(run_id)
@@ -280,18 +337,24 @@ class RunManager:
         run.worker.stop_requested.set()
         run.wake.set()
 
-    async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned.
+    async def change(self, run_id: str, kind: str,
+                     value: Reference | OscillationSpec | list[FaultSpec]) -> dict[str, Any]:
+        """Queue a reference / oscillation / faults change; wait (bounded) until the worker applied it
+        (a re-plan for the first two).
 
         A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
         run = self._active(run_id)
         try:
-            check(value, self.limits)
+            if isinstance(value, list):
+                parse_faults([f.model_dump(mode="json") for f in value], self.limits)
+            else:
+                check(value, self.limits)
         except ValidationError as exc:
             raise ChangeRejected(_say(exc)) from None
         if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
             raise RunNotActive(f"run {run_id} is {run.status}")
-        body = value.model_dump(mode="json")
+        body = ({"faults": [f.model_dump(mode="json") for f in value]} if isinstance(value, list)
+                else value.model_dump(mode="json"))
         change_id = self._repo.add_change(run_id, kind, body)
         fut = run.worker.submit_change(kind, value, change_id)
         run.wake.set()
@@ -350,8 +413,21 @@ class RunManager:
         run = self._runs.get(run_id)
         if run is not None:
             w = run.worker
-            return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"))
+            return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"),
+                           [f.model_dump(mode="json") for f in w.faults])
         return in_force(self.run(run_id).scenario, self.changes(run_id))
+
+    def fault_events(self, run_id: str) -> list[dict[str, Any]]:
+        """The run's fault events (injected, cleared, detected: ``{"t", "text"}``), oldest first."""
+        run = self._runs.get(run_id)
+        if run is not None:
+            return list(run.worker.fault_events)
+        path = self.files(run_id).faults
+        try:
+            events: list[dict[str, Any]] = json.loads(path.read_text())["events"]
+            return events
+        except (OSError, ValueError, KeyError):
+            return []
 
     def hub(self, run_id: str) -> StreamHub | None:
         run = self._runs.get(run_id)

@@ -5,8 +5,9 @@ writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its dat
 rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
 each call steps the loop as far as the speed allows (real time x factor, or as fast as
 possible) for at most a small wall-time budget and returns the latest snapshot.
-Reference / oscillation changes are queued and applied between two samples, in this
-thread (they re-plan, which may take seconds), never on the event loop.
+Reference / oscillation / fault changes are queued and applied between two samples, in this
+thread (they re-plan, which may take seconds), never on the event loop.  The run's fault events
+(faults injected, cleared, detected) are kept in ``faults.json`` beside the recording.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.settings import Settings
 from twin.config import FurnaceConfig
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,10 @@ class LoopLike(Protocol):
 LoopFactory = Callable[[FurnaceConfig, Scenario], LoopLike]
 
 
+#: the events of a run that faults.json keeps (twin.furnace.simulated.faults, twin.runs.loop)
+FAULT_EVENT_PREFIXES = ("fault injected", "faults cleared", "fault detected")
+
+
 class ChangeRejected(ValueError):
     """The loop refused a change (e.g. an unreachable reference)."""
 
@@ -70,7 +75,7 @@ class Advance:
 
 @dataclass
 class _Change:
-    kind: str  # "reference" | "oscillation"
+    kind: str  # "reference" | "oscillation" | "faults"
     value: Any
     change_id: int
     future: concurrent.futures.Future[dict[str, Any]]
@@ -88,8 +93,11 @@ class RunWorker:
         repo: RunRepository,
         files: RunFiles,
         loop_factory: LoopFactory,
+        *,
+        live_url: str | None = None,
     ) -> None:
         self.run_id = run_id
+        self.live_url = live_url  # a rerun viewer / proxy the recording also streams to
         self.scenario = scenario
         self.cfg = cfg
         self.settings = settings
@@ -101,6 +109,9 @@ class RunWorker:
         self.speed: float | None = None if scenario.speed == "max" else float(scenario.speed)
         self.reference: Reference = scenario.reference
         self.oscillation: OscillationSpec = scenario.oscillation
+        #: the faults injected (``at`` in run time; scenario's, then each applied PUT) and the fault events so far
+        self.faults: list[FaultSpec] = list(scenario.faults)
+        self.fault_events: list[dict[str, Any]] = []
         self.latest: SnapshotLike | None = None
         self.latest_wall = 0.0
         self.seq = 0
@@ -118,7 +129,7 @@ class RunWorker:
         self.recording = RecordingSink(
             self.cfg, self.run_id, self.files.recording,
             tc_positions=self.cfg.tc_positions(self.scenario.tc4),
-            image_interval=self.settings.recording_image_interval_s,
+            image_interval=self.settings.recording_image_interval_s, live_url=self.live_url,
         )
         self.loop = self._factory(self.cfg, self.scenario)
         self._rebase(0.0)
@@ -151,6 +162,12 @@ class RunWorker:
                 if ch.kind == "reference":
                     self.loop.set_reference(ch.value)
                     self.reference = ch.value
+                elif ch.kind == "faults":
+                    set_faults = getattr(self.loop, "set_faults", None)
+                    if not callable(set_faults):
+                        raise ValueError("faults can be injected only into a simulated furnace")
+                    set_faults(ch.value)
+                    self.faults = [f.model_copy(update={"at": f.at + t}) for f in ch.value]
                 else:
                     self.loop.set_oscillation(ch.value)
                     self.oscillation = ch.value
@@ -207,6 +224,9 @@ class RunWorker:
             samples.append((snap, self.seq, self.latest_wall))
             if self.recording is not None:
                 self.recording.add(snap)
+            for e in snap.events or ():
+                if str(e).startswith(FAULT_EVENT_PREFIXES):
+                    self.fault_events.append({"t": float(snap.t), "text": str(e)})
             wait = 0.0
             if time.monotonic() - start >= budget_s:
                 break
@@ -231,6 +251,9 @@ class RunWorker:
             write_npz_atomic(self.files.timeseries, data)
         if self.recording is not None:
             self.recording.flush()
+        if self.fault_events or self.faults:
+            write_json_atomic(self.files.faults, {"injected": [f.model_dump(mode="json") for f in self.faults],
+                                                  "events": self.fault_events})
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 

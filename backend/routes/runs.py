@@ -4,26 +4,38 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query, status
+from fastapi import APIRouter, HTTPException, Query, Request, status
 
-from backend.deps import ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
-from backend.repository import RunRow
+from backend.deps import FaultsBody, ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
+from backend.repository import ACTIVE_STATUSES, RunRow
 from backend.run_manager import RunManager
 from backend.schemas import ChangeOut, ChangeResult, RunCreated, RunDetail, RunLinks, RunSummary, StopResult
 
 router = APIRouter(prefix="/api/runs", tags=["runs"])
 
 
-def links(run_id: str) -> RunLinks:
+def links(run_id: str, rerun: str | None = None) -> RunLinks:
     base = f"/api/runs/{run_id}"
     return RunLinks(self=base, stream=f"{base}/stream", metrics=f"{base}/metrics",
-                    recording=f"{base}/recording", timeseries=f"{base}/timeseries")
+                    recording=f"{base}/recording", timeseries=f"{base}/timeseries", faults=f"{base}/faults",
+                    rerun=rerun)
 
 
-def summary(row: RunRow, manager: RunManager) -> RunSummary:
+def rerun_link(request: Request | None, manager: RunManager, run_id: str, state: str) -> str | None:
+    """The server's rerun web viewer on a run: its live stream while it goes, else its recording file."""
+    viewer = None if request is None else getattr(request.app.state, "rerun_viewer", None)
+    if viewer is None:
+        return None
+    if state in ACTIVE_STATUSES and manager.live_url:
+        return str(viewer.link(manager.live_url))
+    return str(viewer.link(f"{str(request.base_url).rstrip('/')}/api/runs/{run_id}/recording"))  # type: ignore[union-attr]
+
+
+def summary(row: RunRow, manager: RunManager, request: Request | None = None) -> RunSummary:
+    state = manager.status(row.id) or row.status
     return RunSummary(
         id=row.id,
-        status=manager.status(row.id) or row.status,
+        status=state,
         created_at=row.created_at,
         started_at=row.started_at,
         ended_at=row.ended_at,
@@ -31,7 +43,7 @@ def summary(row: RunRow, manager: RunManager) -> RunSummary:
         latest=row.latest,
         metrics=row.metrics,
         error=row.error,
-        links=links(row.id),
+        links=links(row.id, rerun_link(request, manager, row.id, state)),
     )
 
 
@@ -46,22 +58,25 @@ async def start_run(manager: ManagerDep, scenario: ScenarioBody) -> RunCreated:
 
 
 @router.get("", response_model=list[RunSummary])
-def list_runs(manager: ManagerDep, limit: Annotated[int, Query(ge=1, le=1000)] = 200) -> list[RunSummary]:
+def list_runs(manager: ManagerDep, request: Request,
+              limit: Annotated[int, Query(ge=1, le=1000)] = 200) -> list[RunSummary]:
     """All runs, newest first."""
-    return [summary(r, manager) for r in manager.runs(limit)]
+    return [summary(r, manager, request) for r in manager.runs(limit)]
 
 
 @router.get("/{run_id}", response_model=RunDetail, responses={404: {"description": "no such run"}})
-def get_run(run_id: str, manager: ManagerDep) -> RunDetail:
+def get_run(run_id: str, manager: ManagerDep, request: Request) -> RunDetail:
     """One run: status, scenario, the reference and oscillation in force, latest values, metrics,
     the changes made while it ran."""
     row = manager.run(run_id)
     files = manager.files(row.id)
     now = manager.in_force(row.id)
     return RunDetail(
-        **summary(row, manager).model_dump(),
+        **summary(row, manager, request).model_dump(),
         reference=now.reference,
         oscillation=now.oscillation,
+        faults=now.faults,
+        fault_events=manager.fault_events(row.id),
         changes=[ChangeOut(**c.__dict__) for c in manager.changes(row.id)],
         files={"recording": files.recording.is_file(), "timeseries": files.timeseries.is_file(),
                "metrics": files.metrics.is_file()},
@@ -98,6 +113,17 @@ async def change_oscillation(run_id: str, manager: ManagerDep, oscillation: Osci
     A field left out takes the furnace's default (``GET /api/furnace``), not the run's current value."""
     manager.run(run_id)
     return ChangeResult(**await manager.change(run_id, "oscillation", oscillation))
+
+
+@router.put("/{run_id}/faults", response_model=ChangeResult, dependencies=[TokenDep],
+            responses={404: {"description": "no such run"}, 409: {"description": "the run has ended"},
+                       422: {"description": "invalid faults, or a furnace that takes none (a real one)"}})
+async def change_faults(run_id: str, manager: ManagerDep, faults: FaultsBody) -> ChangeResult:
+    """Replace the faults injected into the run's simulated furnace: TC1..TC4 stuck, drift (K/s), offset (K),
+    dropout; a lamp group failed or derated (fraction kept).  Each ``at`` counts from now; ``[]`` clears them.
+    The twin is not told: it must find them in its own data (the run's events and ``fault_events``)."""
+    manager.run(run_id)
+    return ChangeResult(**await manager.change(run_id, "faults", faults))
 
 
 @router.get("/{run_id}/metrics", response_model=dict[str, float | None],

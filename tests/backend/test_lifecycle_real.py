@@ -145,6 +145,10 @@ def test_unreachable_reference_is_refused_before_a_run_starts(tmp_path, small_cf
     """With the real loop factory, POST checks the reference against the furnace's reachable range:
     a 422 that says why, instead of a run that would end in error while building its loop."""
     with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg)) as c:
+        end = time.monotonic() + 120  # once the radiation model is ready (during its warm-up: test_warm_up.py)
+        while c.get("/api/health").json()["radiation"] != "ready":
+            assert time.monotonic() < end, c.get("/api/health").json()
+            time.sleep(0.05)
         # 260 K is colder than every surface around the specimen (pydantic allows 250 K and up)
         r = c.post("/api/runs", json={"reference": {"points": [[5.0, 900.0], [10.0, 260.0]]}})
         assert r.status_code == 422, r.text
