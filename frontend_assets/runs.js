@@ -6,6 +6,7 @@ import { $, badge, describeOscillation, describeReference, fmt, LIVE, pct, showM
 import { emptySeries, seriesFromStored } from "./series.js";
 import { state } from "./state.js";
 import { closeStream, connectStream } from "./stream.js";
+import { renderFaults } from "./faults.js";
 
 // The live controls follow what the server says the run uses now (GET /api/runs/{id}: reference, oscillation).
 function setControls(run) {
@@ -25,6 +26,7 @@ function renderRunInfo(run) {
     files.recording ? `<a href="${run.links.recording}" download>recording.rrd</a>` : "",
     files.timeseries ? `<a href="${run.links.timeseries}" download>timeseries.npz</a>` : "",
     state.health && state.health.viser_url ? `<a href="${state.health.viser_url}" target="_blank" rel="noopener">3D view</a>` : "",
+    run.links.rerun ? `<a href="${run.links.rerun}" target="_blank" rel="noopener" title="${LIVE.includes(run.status) ? "the live stream in the rerun web viewer" : "the recording in the rerun web viewer"}">Open in rerun</a>` : "",
   ].filter(Boolean).join(" · ");
   const now = LIVE.includes(run.status) ? "now" : "at the end";
   $("run-details").innerHTML = `
@@ -45,6 +47,7 @@ export async function refreshRun(quiet = false) {
     badge(run.status);
     setControls(run);
     renderRunInfo(run);
+    renderFaults(run);
     if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
     if ((run.changes || []).length !== before) state.dirty = true; // reference markers
   } catch (e) { /* transient */ }
@@ -93,7 +96,7 @@ export async function refreshHistory() {
     return `<tr data-id="${r.id}"><td title="${new Date(r.created_at * 1000).toLocaleString()}">${r.id.slice(0, 6)}${r.scenario.oscillation.enabled ? " ↕" : ""}</td>
       <td><span class="badge ${r.status}" style="color:#fff">${r.status}</span></td>
       <td class="num">${pct(m.mean_error_steady_max)}</td><td class="num">${pct(m.inhomogeneity_steady)}</td>
-      <td><a href="${r.links.recording}" title="rerun recording" download>rrd</a><a href="${r.links.timeseries}" title="raw time series" download>npz</a></td></tr>`;
+      <td><a href="${r.links.recording}" title="rerun recording" download>rrd</a><a href="${r.links.timeseries}" title="raw time series" download>npz</a>${r.links.rerun ? `<a href="${r.links.rerun}" target="_blank" rel="noopener" title="open in the rerun web viewer">rerun</a>` : ""}</td></tr>`;
   }).join("");
   if (html !== historyHtml) {
     document.querySelector("#history tbody").innerHTML = html;

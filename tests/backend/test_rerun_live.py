@@ -30,8 +30,8 @@ SCENARIO = {"duration": 4.0, "reference": {"setpoint": 700.0, "t_E": 3.0},
 
 
 def _env(home: Path) -> dict[str, str]:
-    return {**os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / "cfg"), "XDG_CACHE_HOME": str(home / "cache"),
-            "XDG_DATA_HOME": str(home / "data"), "RERUN_ANALYTICS": "0"}
+    return {**os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / "cfg"),
+            "XDG_CACHE_HOME": str(home / "cache"), "XDG_DATA_HOME": str(home / "data"), "RERUN_ANALYTICS": "0"}
 
 
 def _stats(rrd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
