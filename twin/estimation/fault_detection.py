@@ -72,6 +72,9 @@ class DetectionSettings:
     min_drift: float = 0.05  # K/s
     min_power_loss: float = 0.2  # of a group's nominal power
     failed_below: float = 0.15  # a group keeping less than this of its power is failed
+    gain_slack: float = 0.25  # a group's power is taken between -slack and 1 + slack of nominal (plausible fits)
+    common_range: tuple[float, float] = (-0.5, 0.5)  # plausible loss of all groups' power (lamp efficiency)
+    capacity_range: tuple[float, float] = (-0.5, 1.0)  # plausible heat capacity deviation (Curie peak ~ +50 %)
     readmit_s: float = 3.0  # a left-out TC reads consistently this long: used again
     readmit_z: float = 2.0  # "consistently": mean |normalised innovation| below this
     block_s: float = 1.0  # innovation inflation (FaultDetector._track_inflation): block length
@@ -165,7 +168,7 @@ class FaultDetector:
         for i, name in enumerate(TC_NAMES):
             kind, since = "", 0
             if self._unusable[i] >= self._n(s.dropout_s):
-                kind, since = "dropout", self._unusable[i]
+                kind, since = "dropout", self._unusable[i] - 1  # samples since the first one without a reading
             elif self._flat[i] + 1 >= self._n(s.flat_s):
                 kind, since = "stuck", self._flat[i]
             if not kind or self._reported[i] == kind:
@@ -211,7 +214,9 @@ class FaultDetector:
             self._track_inflation(nu / np.sqrt(np.diag(S)))
             self._readmit(t, nu, S)
             tested = ~self.excluded & np.isfinite(nu)
-            self.banks.update(self._j, self.C, nu, S, np.asarray(info.gain, float)[:n], tested)
+            root = np.sqrt(self.inflation)  # coloured innovations count as noisier (_track_inflation)
+            self.banks.update(self._j, self.C, nu, S * np.outer(root, root), np.asarray(info.gain, float)[:n],
+                              tested)
             self._decide(t)
         out, self._pending = self._pending, []
         return out
@@ -224,8 +229,8 @@ class FaultDetector:
         coloured, and the GLR's lambda then overstates the evidence by about
         kappa = N mean(block means^2) (a bias counts too).  kappa is measured per TC over
         ``inflation_history_s`` of blocks that end ``inflation_lag_s`` before now (a fault under test
-        inflates its own yardstick only after that), and lambda is divided by it: the TC's own kappa for
-        its offset and drift, the largest for hypotheses that act on every TC.
+        inflates its own yardstick only after that), and the GLR takes the innovation covariance
+        as S_ij sqrt(kappa_i kappa_j): a TC whose innovations are coloured weighs less.
         """
         s = self.settings
         self._block.append(np.where(np.isfinite(z), z, np.nan))
@@ -263,26 +268,42 @@ class FaultDetector:
                                         f"{TC_NAMES[i]} agrees with the estimate again for {s.readmit_s:g} s "
                                         f"(was: {self.reasons[i]}); used again"))
 
-    def _decide(self, t: float) -> None:
+    def _plausible(self, size: Array) -> NDArray[np.bool_]:
+        """Which fits (banks, H) are physically possible: a group between -slack and 1 + slack of its nominal
+        power after the loss, the nuisances within their ranges; offsets and drifts of any size.  Hypotheses
+        that cannot apply now (about a TC left out, a group taken as failed) are not."""
         s = self.settings
-        # hypotheses that cannot apply now: about a TC already left out, a group already taken as failed
-        exclude = np.array([(k in ("offset", "drift") and self.excluded[c]) or (k == "lamp" and self.lamp_gains[c] <= 0)
-                            for k, c in zip(self.kinds, self.columns, strict=True)])
+        ok = np.ones(size.shape, bool)
+        for h, (kind, c) in enumerate(zip(self.kinds, self.columns, strict=True)):
+            if kind == "lamp":
+                after = self.lamp_gains[c] - size[:, h]
+                ok[:, h] = (after >= -s.gain_slack) & (after <= 1.0 + s.gain_slack) & (self.lamp_gains[c] > 0)
+            elif kind in ("common", "capacity"):
+                lo, hi = s.common_range if kind == "common" else s.capacity_range
+                ok[:, h] = (size[:, h] >= lo) & (size[:, h] <= hi)
+            else:
+                ok[:, h] = not self.excluded[c]
+        return ok
+
+    def _decide(self, t: float) -> None:
+        """Declare the most likely plausible fault of a mature bank when it is likely enough, beats every
+        other plausible hypothesis (any onset, young banks too) by the margin and matters (module docstring)."""
+        s = self.settings
         if not self._ready:
             return
-        best = self.banks.best(self._n(s.min_age_s), exclude)
-        if best is None or self.kinds[best.hypothesis] in NUISANCES:
+        tab = self.banks.table()
+        if tab is None:
             return
-        k = self._kappa(best.hypothesis)
-        if best.llr / k < s.llr_threshold or (best.llr - best.runner_up_llr) / k < s.llr_margin:
+        llr = np.where(self._plausible(tab.size), tab.llr, 0.0)
+        eligible = np.where((tab.ages >= self._n(s.min_age_s))[:, None], llr, 0.0)
+        eligible[:, [h for h, kind in enumerate(self.kinds) if kind in NUISANCES]] = 0.0
+        if not np.any(eligible >= s.llr_threshold):
             return
-        if not self._relevant(best):
+        k, h = np.unravel_index(int(np.argmax(eligible)), eligible.shape)
+        best = tab.candidate(int(k), int(h), llr)
+        if best.llr - best.runner_up_llr < s.llr_margin or not self._relevant(best):
             return
         self._act(t, best)
-
-    def _kappa(self, h: int) -> float:
-        kind = self.kinds[h]
-        return float(self.inflation[self.columns[h]] if kind in ("offset", "drift") else self.inflation.max())
 
     def _relevant(self, c: Candidate) -> bool:
         s = self.settings
@@ -298,9 +319,9 @@ class FaultDetector:
         s = self.settings
         kind, target = self.kinds[c.hypothesis], self.targets[c.hypothesis]
         onset = c.onset * self.t_s
-        k = self._kappa(c.hypothesis)
-        how = f"GLR {c.llr / k:.0f}, next {self.targets[c.runner_up]} {c.runner_up_llr / k:.0f}" + (
-            f", innovations x{k:.1f} white" if k > 1.05 else "")
+        k = float(self.inflation.max())
+        how = f"GLR {c.llr:.0f}, next {self.targets[c.runner_up]} {c.runner_up_llr:.0f}" + (
+            f", innovations up to x{k:.1f} white" if k > 1.05 else "")
         if kind in ("offset", "drift"):
             i = TC_NAMES.index(target)
             unit = "K" if kind == "offset" else "K/s"

@@ -169,28 +169,50 @@ class SignatureBanks:
         if capacity.size and increment is not None:
             self._s[:, capacity] += np.asarray(increment, float)[:, None]
 
-    def best(self, min_age: int, exclude: NDArray[np.bool_] | None = None) -> Candidate | None:
-        """The hypothesis and onset of largest lambda among banks at least ``min_age`` samples old.
-
-        ``exclude`` (H,) masks hypotheses that cannot apply now (e.g. about a TC already left out).
-        """
+    def table(self) -> Table | None:
+        """lambda, size and its sigma of every hypothesis (columns) at every live onset (rows), with the
+        onsets and ages (samples); ``None`` before the first bank."""
         if not self._onsets:
             return None
         H = self.H
-        B = self._B.reshape(-1, H)
-        A = self._A.reshape(-1, H)
+        A, B = self._A.reshape(-1, H), self._B.reshape(-1, H)
         with np.errstate(divide="ignore", invalid="ignore"):
-            llr = np.where(B > 1e-12, A**2 / B, 0.0)
-        if exclude is not None:
-            llr[:, exclude] = 0.0
-        ages = self._j - np.asarray(self._onsets)
-        llr[ages < min_age] = 0.0
-        if not np.any(llr > 0):
+            ok = B > 1e-12
+            llr = np.where(ok, A**2 / np.where(ok, B, 1.0), 0.0)
+            size = np.where(ok, A / np.where(ok, B, 1.0), 0.0)
+            sigma = np.where(ok, 1.0 / np.sqrt(np.where(ok, B, 1.0)), np.inf)
+        onsets = np.asarray(self._onsets)
+        return Table(llr, size, sigma, onsets, self._j - onsets)
+
+    def best(self, min_age: int) -> Candidate | None:
+        """The hypothesis and onset of largest lambda among banks at least ``min_age`` samples old, with the
+        runner-up: the largest lambda of any other hypothesis at any onset."""
+        tab = self.table()
+        if tab is None:
             return None
-        k, h = np.unravel_index(int(np.argmax(llr)), llr.shape)
-        row = llr[k].copy()
-        row[h] = -1.0
-        ru = int(np.argmax(row)) if H > 1 else -1
-        return Candidate(hypothesis=int(h), onset=self._onsets[k], age=int(ages[k]),
-                         size=float(A[k, h] / B[k, h]), sigma=float(1.0 / np.sqrt(B[k, h])), llr=float(llr[k, h]),
-                         runner_up=ru, runner_up_llr=float(row[ru]) if ru >= 0 else 0.0)
+        eligible = np.where((tab.ages >= min_age)[:, None], tab.llr, 0.0)
+        if not np.any(eligible > 0):
+            return None
+        k, h = np.unravel_index(int(np.argmax(eligible)), eligible.shape)
+        return tab.candidate(int(k), int(h), tab.llr)
+
+
+@dataclass(frozen=True)
+class Table:
+    """What :meth:`SignatureBanks.table` returns: (banks, H) arrays and per-bank onsets and ages."""
+
+    llr: Array
+    size: Array
+    sigma: Array
+    onsets: NDArray[np.int64]
+    ages: NDArray[np.int64]
+
+    def candidate(self, k: int, h: int, competitors: Array) -> Candidate:
+        """Bank k's hypothesis h, its runner-up the best other hypothesis (any onset) of ``competitors``."""
+        other = competitors.copy()
+        other[:, h] = -np.inf
+        kk, ru = np.unravel_index(int(np.argmax(other)), other.shape)
+        ru_llr = float(other[kk, ru]) if np.isfinite(other[kk, ru]) else 0.0
+        return Candidate(hypothesis=h, onset=int(self.onsets[k]), age=int(self.ages[k]), size=float(self.size[k, h]),
+                         sigma=float(self.sigma[k, h]), llr=float(competitors[k, h]),
+                         runner_up=int(ru) if other.shape[1] > 1 else -1, runner_up_llr=max(ru_llr, 0.0))

@@ -4,7 +4,8 @@ Each case is the default run (or the one given) with one fault injected at ``at`
 noise seeds and with the fault-free run of the same seed beside it.  Per case and seed:
 
 - ``detected_after_s``: from the onset to the first decision of the fault detector about the faulty
-  TC or lamp group (``None``: not found within the run); ``kind``: what it said;
+  TC or lamp group (``None``: not found within the run); ``kind``: what it said; ``failed_after_s``: for a
+  lamp group, until it was taken as failed (a first decision may be a derate);
 - ``false``: decisions about anything else (in the faulty run, and in the fault-free one);
 - ``tc4_after``: max |TC4 - estimate at TC4| (K) from the onset to the end, and ``tc4_after_ok``: the
   same in the fault-free run; their ratio is the ride-through figure for TC faults (the TC4 reading
@@ -45,6 +46,7 @@ CASES: tuple[tuple[str, dict[str, Any]], ...] = (
     ("T2v failed", {"target": "T2v", "kind": "failed"}),
     ("T2h failed", {"target": "T2h", "kind": "failed"}),
     ("T1h failed", {"target": "T1h", "kind": "failed"}),
+    ("T4h failed", {"target": "T4h", "kind": "failed"}),
     ("T2v derate 0.5", {"target": "T2v", "kind": "derate", "value": 0.5}),
 )
 DETECTED = "fault detected: "
@@ -96,6 +98,7 @@ def study(cfg: FurnaceConfig, *, seeds: int = 3, at: float = 150.0, oscillation:
                 "case": name, "seed": seed, "at": at,
                 "detected_after_s": None if not mine else round(mine[0][0] - at, 2),
                 "kind": None if not mine else mine[0][2], "said": None if not mine else mine[0][3],
+                "failed_after_s": next((round(d[0] - at, 2) for d in mine if d[2] == "failed"), None),
                 "false": [f"t={d[0]:.1f} {d[1]} {d[2]}" for d in false],
                 "false_fault_free": [f"t={d[0]:.1f} {d[1]} {d[2]}" for d in ok["detections"] if d[2] != "readmitted"],
                 "tc4_after": _tc4_max(res["ts"], at), "tc4_after_ok": _tc4_max(ok["ts"], at),
@@ -135,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
     for r in out["rows"]:
-        sys.stdout.write(f"{r['case']:22s} seed {r['seed']}: after {r['detected_after_s']} s ({r['kind']}), "
+        sys.stdout.write(f"{r['case']:22s} seed {r['seed']}: after {r['detected_after_s']} s ({r['kind']}; failed "
+                         f"after {r['failed_after_s']}), "
                          f"TC4 {r['tc4_after']:.1f} vs {r['tc4_after_ok']:.1f} K, mean {r['mean_error_steady']} vs "
                          f"{r['mean_error_steady_ok']} K, inh {r['inhomogeneity_steady']} vs "
                          f"{r['inhomogeneity_steady_ok']} K, false {r['false']} / {r['false_fault_free']}\n")
