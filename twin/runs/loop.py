@@ -157,7 +157,9 @@ class ClosedLoop:
             t_E=float(scenario.reference.t_E), setpoint=float(scenario.reference.setpoint),
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
-        self.record = RunRecord(header, has_truth=self._has_truth)
+        # fields at every sample through the metrics' windows (up to 2 t_E), then one per second (memory)
+        self.record = RunRecord(header, has_truth=self._has_truth, field_every=max(1, round(1.0 / self.t_s)),
+                                full_rate_until=2.0 * float(scenario.reference.t_E))
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 

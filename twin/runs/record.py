@@ -5,8 +5,10 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
 
 * per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
   ``u``, ``u_ff`` (n, 6) fractions of u_max;
-* fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
-  only when the furnace is a simulation (a real furnace has no true field);
+* fields at ``t_field``: ``field_hat`` (m, N_y, N_x) K, and ``field_true`` only when the furnace is a
+  simulation (a real furnace has no true field).  Every sample up to ``full_rate_until`` (the loop: 2 t_E,
+  the end of the metrics' windows), then every ``field_every``-th (the loop: one per second, the least
+  product.md allows), so a long run's memory grows by the scalars and about 3.5 kB per second;
 * events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
@@ -136,10 +138,15 @@ class RunRecord:
     has_truth : the furnace reports a true field (a simulation); otherwise ``field_true`` is absent
     """
 
-    def __init__(self, header: RunHeader, *, has_truth: bool = True) -> None:
+    def __init__(self, header: RunHeader, *, has_truth: bool = True, field_every: int = 1,
+                 full_rate_until: float = np.inf) -> None:
         self.header = header
         self.has_truth = has_truth
+        self.field_every = max(1, int(field_every))
+        self.full_rate_until = float(full_rate_until)
         self._columns: dict[str, _Column] = {}
+        self._fields: dict[str, _Column] = {}  # t_field and the field series
+        self._since_field = 0
         self._events: list[tuple[float, str]] = []
 
     def __len__(self) -> int:
@@ -148,17 +155,24 @@ class RunRecord:
     def append(self, snap: Snapshot) -> None:
         """Add one sample (its events too)."""
         values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
-        values["field_hat"] = snap.field_hat
-        if self.has_truth:
-            if snap.field_true is None:
-                raise ValueError("this record keeps a true field, the snapshot has none")
-            values["field_true"] = snap.field_true
+        if self.has_truth and snap.field_true is None:
+            raise ValueError("this record keeps a true field, the snapshot has none")
         if not self._columns:
             for k, v in values.items():
-                dtype = np.float32 if k in FIELD_SERIES else float
-                self._columns[k] = _Column(np.shape(v), dtype)
+                self._columns[k] = _Column(np.shape(v), float)
         for k, v in values.items():
             self._columns[k].append(v)
+        self._since_field += 1
+        if float(snap.t) <= self.full_rate_until or self._since_field >= self.field_every or not self._fields:
+            self._since_field = 0
+            fields_now: dict[str, Any] = {"t_field": snap.t, "field_hat": snap.field_hat}
+            if self.has_truth:
+                fields_now["field_true"] = snap.field_true
+            if not self._fields:
+                for k, v in fields_now.items():
+                    self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
+            for k, v in fields_now.items():
+                self._fields[k].append(v)
         self._events.extend((float(snap.t), str(e)) for e in snap.events)
 
     def arrays(self) -> dict[str, Any]:
@@ -172,9 +186,10 @@ class RunRecord:
         for k in FIELD_SERIES:
             if k == "field_true" and not self.has_truth:
                 continue
-            col = self._columns.get(k)
+            col = self._fields.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
-        out["t_field"] = out["t"].copy()
+        t_field = self._fields.get("t_field")
+        out["t_field"] = t_field.view().copy() if t_field is not None else np.zeros(0)
         out["event_t"] = np.asarray([t for t, _ in self._events], float)
         out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
         return out
