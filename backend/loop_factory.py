@@ -46,10 +46,17 @@ class WarmUpStatus:
         return (self.finished if self.finished is not None else time.monotonic()) - self.started
 
 
-class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once)."""
+#: CPU priority of a run at speed max (os.nice): the server and the runs paced in real time come first
+MAX_SPEED_NICENESS = 5
 
-    def __init__(self) -> None:
+
+class DefaultLoopFactory:
+    """Builds the server's runs: each ``twin.runs.loop.ClosedLoop`` in its own process
+    (:class:`backend.process_loop.ProcessLoop`), or in the server's process with ``processes=False``
+    (sharing the radiation model loaded here)."""
+
+    def __init__(self, *, processes: bool = True) -> None:
+        self.processes = processes
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
@@ -160,6 +167,11 @@ class DefaultLoopFactory:
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+        if self.processes:
+            from backend.process_loop import ProcessLoop
+
+            self.radiation(cfg)  # the child loads it from the disk cache: make sure it is there
+            return ProcessLoop(cfg, scenario, niceness=MAX_SPEED_NICENESS if scenario.speed == "max" else 0)
         from twin.runs.loop import ClosedLoop
 
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples

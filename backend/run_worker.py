@@ -246,9 +246,13 @@ class RunWorker:
     def flush(self, metrics: dict[str, Any] | None = None) -> None:
         """Write the time series so far, the latest values and the recording's buffer to disk."""
         self._last_flush = time.monotonic()
-        data = self._timeseries()
-        if data is not None:
-            write_npz_atomic(self.files.timeseries, data)
+        save = getattr(self.loop, "save_timeseries", None)  # a loop in its own process writes it there
+        if callable(save) and self.latest is not None:
+            save(self.files.timeseries)
+        else:
+            data = self._timeseries()
+            if data is not None:
+                write_npz_atomic(self.files.timeseries, data)
         if self.recording is not None:
             self.recording.flush()
         if self.fault_events or self.faults:

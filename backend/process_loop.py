@@ -1,0 +1,204 @@
+"""A run's closed loop in its own process, so that no run holds the server's interpreter.
+
+With the loops in the server's threads, two runs at speed ``max`` keep the interpreter's lock (GIL)
+busy, and every websocket send of the event loop (each one releases and retakes it) waits for it:
+the frames of the other clients come late.  :class:`ProcessLoop` runs ``twin.runs.loop.ClosedLoop``
+in a child process and answers the calls the run worker makes (``backend.run_worker.LoopLike``):
+each ``step()`` is one round trip over a pipe that returns the sample's snapshot.  The child writes
+the run's time series itself (:meth:`ProcessLoop.save_timeseries`), so flushes do not copy it
+between processes.  Runs at speed ``max`` get a lower CPU priority (``nice``): the server and the
+runs paced in real time come first.
+
+Children are forked from a fork server (``multiprocessing``'s "forkserver", safe with the server's
+threads) that has the numerics imported already; each child loads the radiation model from the disk
+cache (the server's warm-up has filled it) and builds its loop.  A child dies with the server
+(``PR_SET_PDEATHSIG``); an exception in the child comes back as the same exception type when it
+can be pickled, else as ``RuntimeError`` with its text.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import signal
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from twin.config import FurnaceConfig
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
+
+log = logging.getLogger(__name__)
+
+PRELOAD = ["numpy", "scipy.linalg", "casadi", "twin.runs.loop", "twin.control.replan", "twin.estimation.ekf",
+           "twin.radiation.model", "twin.furnace.simulated.furnace"]
+_CONTEXT: Any = None
+
+
+def _context() -> Any:
+    global _CONTEXT
+    if _CONTEXT is None:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(PRELOAD)
+        _CONTEXT = ctx
+    return _CONTEXT
+
+
+class LoopProcessError(RuntimeError):
+    """The child failed in a way that cannot be re-raised as its own exception."""
+
+
+def _die_with_parent() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _portable(exc: BaseException) -> BaseException:
+    """The exception as the parent will see it: itself if it survives pickling, else a RuntimeError."""
+    import pickle
+
+    try:
+        pickle.loads(pickle.dumps(exc))
+        return exc
+    except Exception:
+        kind = ValueError if isinstance(exc, ValueError) else LoopProcessError
+        return kind(f"{type(exc).__name__}: {exc}")
+
+
+def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int) -> None:  # pragma: no cover - child
+    """The child: build the loop, then answer (method, args) messages until "close"."""
+    _die_with_parent()
+    if niceness:
+        os.nice(niceness)
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)  # small matrices: BLAS threads would only contend (tests/conftest.py)
+    except Exception:
+        pass
+    from twin.radiation import radiation_model
+    from twin.runs.loop import ClosedLoop
+    from twin.runs.record import save_arrays
+
+    try:
+        cfg = FurnaceConfig.model_validate_json(cfg_json)
+        scenario = Scenario.model_validate_json(scenario_json)
+        loop = ClosedLoop(cfg, scenario, radiation_model(cfg), background=True)
+    except BaseException as exc:
+        conn.send(("error", _portable(exc)))
+        return
+    conn.send(("ok", {"tc_positions": loop.tc_positions, "done": loop.done}))
+    while True:
+        try:
+            method, args = conn.recv()
+        except EOFError:
+            break
+        try:
+            if method == "close":
+                loop.close()
+                conn.send(("ok", None))
+                break
+            if method == "step":
+                result: Any = (loop.step(), loop.done)
+            elif method == "save_timeseries":
+                save_arrays(args[0], loop.timeseries(), compress=False)
+                result = None
+            else:
+                result = getattr(loop, method)(*args)
+            conn.send(("ok", result))
+        except BaseException as exc:
+            conn.send(("error", _portable(exc)))
+
+
+class ProcessLoop:
+    """``ClosedLoop(cfg, scenario)`` in a child process (module docstring); the run worker's ``LoopLike``."""
+
+    def __init__(self, cfg: FurnaceConfig, scenario: Scenario, *, niceness: int = 0) -> None:
+        ctx = _context()
+        here, there = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve, args=(there, cfg.model_dump_json(), scenario.model_dump_json(),
+                                                      niceness), name="furnace-run", daemon=True)
+        self._proc.start()
+        there.close()
+        self._conn: Connection = here
+        self._closed = False
+        try:
+            info = self._reply()  # the child built its loop (the first plan: seconds)
+        except BaseException:
+            self._kill()
+            raise
+        self.tc_positions = info["tc_positions"]
+        self._done = bool(info["done"])
+
+    def _reply(self) -> Any:
+        try:
+            kind, value = self._conn.recv()
+        except EOFError:
+            raise LoopProcessError(f"the run's process ended (exit status {self._proc.exitcode})") from None
+        if kind == "error":
+            raise value
+        return value
+
+    def _call(self, method: str, *args: Any) -> Any:
+        if self._closed:
+            raise LoopProcessError("the run's process is closed")
+        self._conn.send((method, args))
+        return self._reply()
+
+    # ---- LoopLike ----
+    @property
+    def done(self) -> bool:
+        return self._done
+
+    def step(self) -> Any:
+        snap, self._done = self._call("step")
+        return snap
+
+    def set_reference(self, ref: Reference) -> None:
+        self._call("set_reference", ref)
+
+    def set_oscillation(self, spec: OscillationSpec) -> None:
+        self._call("set_oscillation", spec)
+
+    def set_faults(self, faults: list[FaultSpec]) -> None:
+        self._call("set_faults", faults)
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        got: list[FaultSpec] = self._call("faults_in_force")
+        return got
+
+    def timeseries(self) -> dict[str, Any]:
+        got: dict[str, Any] = self._call("timeseries")
+        return got
+
+    def save_timeseries(self, path: Path) -> None:
+        """Write the time series (``timeseries.npz`` layout) to ``path`` from the child, atomically."""
+        self._call("save_timeseries", str(path))
+
+    def metrics(self) -> dict[str, Any]:
+        got: dict[str, Any] = self._call("metrics")
+        return got
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        try:
+            self._call("close")
+        except Exception:
+            log.warning("the run's process did not close cleanly", exc_info=True)
+        self._closed = True
+        self._conn.close()
+        self._proc.join(timeout=10)
+        if self._proc.is_alive():
+            self._kill()
+
+    def _kill(self) -> None:
+        self._closed = True
+        if self._proc.is_alive():
+            self._proc.kill()
+        self._proc.join(timeout=10)
