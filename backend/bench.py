@@ -17,8 +17,10 @@ whose speed makes ``client_fps`` samples per second (t_s = 0.1 s: speed 2 for 20
 
 Long run (``long_sim_s`` simulated seconds at speed ``max``, 2 clients attached):
 
-- ``rss_growth_mb``: the server's peak resident memory during the run minus its value once the run had
-  gone ``baseline_sim_s`` (its first flushes, files and plans done), sampled every 0.5 s;
+- ``rss_growth_mb``: the server's peak memory during the run minus its value once the run had gone
+  ``baseline_sim_s`` (its first flushes, files and plans done), sampled every 0.5 s; the memory of the
+  server's process tree (the server, its fork server and the run's own process) as proportional set
+  size, so pages they share count once;
   ``rss_baseline_mb``, ``rss_peak_mb``, ``rss_after_mb`` (after the run ended), ``long_run_sim_s``,
   ``long_run_rtf`` (its speed: simulated s per wall s);
 - ``max_speed_rtf_with_clients`` (= ``long_run_rtf``), ``closed_loop_rtf_bare`` (the same scenario stepped
@@ -58,12 +60,37 @@ def _call(port: int, method: str, path: str, body: Any = None, timeout: float = 
         return json.loads(r.read())
 
 
-def _rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    raise RuntimeError(f"no VmRSS for pid {pid}")
+def _tree(pid: int) -> list[int]:
+    """``pid`` and its descendants (the server, its fork server and the runs' processes)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        children.setdefault(ppid, []).append(int(entry))
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        todo.extend(children.get(p, []))
+    return out
+
+
+def _memory_mb(pid: int) -> float:
+    """Proportional set size (PSS) of the server's process tree in MB: the pages a process shares with
+    another (the fork server's imported modules in each run's process) count once in total."""
+    total = 0
+    for p in _tree(pid):
+        try:
+            with open(f"/proc/{p}/smaps_rollup") as f:
+                total += next(int(line.split()[1]) for line in f if line.startswith("Pss:"))
+        except (OSError, StopIteration):
+            continue  # ended meanwhile
+    return total / 1024.0
 
 
 class _Server:
@@ -203,14 +230,14 @@ def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float) -> di
         clients = [asyncio.create_task(_client(srv.port, run_id, rows[k], 1e9)) for k in range(2)]
         while not all(c.done() for c in clients):
             t = rows[0][-1][2] if rows[0] else 0.0
-            samples.append((t, _rss_mb(srv.proc.pid)))
+            samples.append((t, _memory_mb(srv.proc.pid)))
             await asyncio.sleep(0.5)
 
     asyncio.run(watch())
     body = srv.wait_status(run_id, {"finished", "stopped", "error", "interrupted"})
     if body["status"] != "finished":
         raise RuntimeError(f"the long run ended {body['status']}: {body['error']}")
-    after = _rss_mb(srv.proc.pid)
+    after = _memory_mb(srv.proc.pid)
     base = [m for t, m in samples if t >= baseline_sim_s]
     run = [r for r in rows[0] if r[3] in ("running", "finished")]
     rtf = (run[-1][2] - run[0][2]) / max(run[-1][1] - run[0][1], 1e-9) if len(run) >= 2 else float("nan")

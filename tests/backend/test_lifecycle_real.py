@@ -27,7 +27,8 @@ OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory, small_cfg):
     data = tmp_path_factory.mktemp("lifecycle")
-    with TestClient(create_app(Settings(data_dir=data), small_cfg)) as c:
+    # a PUT answers when its re-plan is done (not "pending" after the default 5 s on a loaded machine)
+    with TestClient(create_app(Settings(data_dir=data, change_timeout_s=120.0), small_cfg)) as c:
         r = c.post("/api/runs", json=SCENARIO)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
