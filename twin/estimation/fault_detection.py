@@ -76,7 +76,7 @@ class DetectionSettings:
     common_range: tuple[float, float] = (-0.5, 0.5)  # plausible loss of all groups' power (lamp efficiency)
     capacity_range: tuple[float, float] = (-0.5, 1.0)  # plausible heat capacity deviation (Curie peak ~ +50 %)
     readmit_s: float = 3.0  # a left-out TC reads consistently this long: used again
-    readmit_z: float = 2.0  # "consistently": mean |normalised innovation| below this
+    readmit_z: float = 1.0  # "consistently": |mean normalised innovation| over readmit_s below this
     block_s: float = 1.0  # innovation inflation (FaultDetector._track_inflation): block length
     inflation_lag_s: float = 5.0  # blocks of the last this many s are not used for it
     inflation_history_s: float = 60.0  # blocks used, before the lag
@@ -132,7 +132,7 @@ class FaultDetector:
         self._flat = np.zeros(len(TC_NAMES), int)
         self._unusable = np.zeros(len(TC_NAMES), int)
         self._reported = [""] * len(TC_NAMES)  # reading faults reported for TC1..4 (TC4: report only)
-        self._consistent = np.zeros(N_EKF_TCS, int)
+        self._recent: list[list[float]] = [[] for _ in range(N_EKF_TCS)]  # normalised innovations while left out
         self._y = np.full(len(TC_NAMES), np.nan)
         self._pending: list[Detection] = []
         self._jac_every = self._n(jacobian_every_s)
@@ -165,6 +165,8 @@ class FaultDetector:
         self._unusable = np.where(usable, 0, self._unusable + 1)
         self._last = y
         self._y = y
+        if self._reported[3] and usable[3] and self._flat[3] == 0:
+            self._reported[3] = ""  # TC4 (never left out: it only validates) reads again
         for i, name in enumerate(TC_NAMES):
             kind, since = "", 0
             if self._unusable[i] >= self._n(s.dropout_s):
@@ -194,7 +196,7 @@ class FaultDetector:
             return "; still left out of the estimate"
         self.excluded[i] = True
         self.reasons[i] = why
-        self._consistent[i] = 0
+        self._recent[i] = []
         self.banks.reset()
         n_left = int((~self.excluded).sum())
         return f"; left out of the estimate ({n_left} TC{'s' if n_left != 1 else ''} left)"
@@ -254,13 +256,21 @@ class FaultDetector:
             self.inflation = np.maximum(1.0, np.where(np.isfinite(var), n * var, 1.0))
 
     def _readmit(self, t: float, nu: Array, S: Array) -> None:
-        """A left-out TC whose readings agree with the estimate for ``readmit_s`` is used again."""
+        """A left-out TC is used again when, for ``readmit_s``, it gave a reading at every sample, never the
+        same one twice in a row for ``flat_s``, and the mean of its normalised innovations (against the
+        estimate made without it) stayed below ``readmit_z``: a bias as small as the estimate's own
+        uncertainty there."""
         s = self.settings
-        z = np.abs(nu) / np.sqrt(np.diag(S))
+        z = nu / np.sqrt(np.diag(S))
+        n = self._n(s.readmit_s)
         for i in np.flatnonzero(self.excluded):
-            ok = np.isfinite(z[i]) and z[i] < s.readmit_z and self._flat[i] + 1 < self._n(s.flat_s)
-            self._consistent[i] = self._consistent[i] + 1 if ok else 0
-            if self._consistent[i] >= self._n(s.readmit_s):
+            recent = self._recent[i]
+            if not np.isfinite(z[i]) or self._flat[i] + 1 >= self._n(s.flat_s):
+                recent.clear()
+                continue
+            recent.append(float(z[i]))
+            del recent[:-n]
+            if len(recent) == n and abs(float(np.mean(recent))) < s.readmit_z:
                 self.excluded[i] = False
                 self._reported[i] = ""
                 self.banks.reset()
