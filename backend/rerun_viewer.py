@@ -30,7 +30,19 @@ log = logging.getLogger(__name__)
 
 
 def rerun_binary() -> str:
-    """The ``rerun`` CLI of the environment this server runs in (rerun-sdk's), else the one on PATH."""
+    """The ``rerun`` executable that ships in rerun-sdk (``rerun_cli/rerun``), else the ``rerun`` on PATH.
+
+    Not the environment's ``bin/rerun``: that is a Python wrapper that runs the executable as *its*
+    child, so stopping (or killing) the wrapper would leave the viewer running.
+    """
+    try:
+        import rerun_cli
+
+        bundled = Path(rerun_cli.__file__).parent / "rerun"
+        if bundled.exists():
+            return str(bundled)
+    except ImportError:
+        pass
     here = Path(sys.executable).parent / "rerun"
     if here.exists():
         return str(here)
