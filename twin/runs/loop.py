@@ -77,6 +77,7 @@ class _Plan:
 class _Pending:
     future: Future[_Plan]
     description: str
+    fresh_integrator: bool = False
 
 
 class ClosedLoop:
@@ -144,6 +145,7 @@ class ClosedLoop:
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimator = Estimator(self._ctl.nominal, cfg, theta0)
         self.detector = FaultDetector(cfg, self._ctl.nominal)
+        self._motion_for_detection(scenario.oscillation)
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -240,25 +242,31 @@ class ClosedLoop:
             self.furnace.set_oscillation(spec, t_now)
             self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s")
 
-    def _start_replan(self, spec: OscillationSpec, description: str) -> None:
+    def _start_replan(self, spec: OscillationSpec, description: str, *, fresh_integrator: bool = False) -> None:
         theta = self.estimator.state.theta.copy()
         t0 = self.j * self.t_s
         ref_fn, previous = self._ref_fn, self._ctl.plan
         self._events.append(description)
         if self._executor is None:
-            self._install(self._plan(spec, theta, t0, ref_fn, previous), description)
+            self._install(self._plan(spec, theta, t0, ref_fn, previous), description, fresh_integrator)
         else:
             fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous)
-            self._pending = _Pending(fut, description)
+            self._pending = _Pending(fut, description, fresh_integrator)
 
-    def _install(self, ctl: _Plan, description: str) -> None:
-        """Swap in a new plan at a sample boundary; the integrator state carries over."""
+    def _install(self, ctl: _Plan, description: str, fresh_integrator: bool = False) -> None:
+        """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
+        models what the integrator was making up for (a lamp group's lost power): then it starts at 0."""
         motion_changed = ctl.nominal.oscillation != self._ctl.nominal.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
+        if fresh_integrator:
+            from twin.control.lqg import IntegratorState
+
+            self.controller.state = IntegratorState()
         self.estimator.set_model(ctl.nominal)
         if motion_changed:
             self.detector.set_model(ctl.nominal)
+            self._motion_for_detection(self._oscillation)
         self._events.append(f"re-planned ({description}): {ctl.plan.status}" + (f"; {ctl.note}" if ctl.note else ""))
 
     def _poll_pending(self) -> None:
@@ -267,7 +275,7 @@ class ClosedLoop:
             return
         self._pending = None
         try:
-            self._install(p.future.result(), p.description)
+            self._install(p.future.result(), p.description, p.fresh_integrator)
         except Exception as exc:  # a failed re-plan keeps the old plan running
             log.exception("re-planning failed: %s", p.description)
             self._events.append(f"re-planning failed ({p.description}): {exc}")
@@ -330,6 +338,17 @@ class ClosedLoop:
             self.j += 1
             return snap
 
+    def _motion_for_detection(self, spec: OscillationSpec) -> None:
+        """The innovation tests only while the estimator's model explains its innovations: not with the
+        averaged model (eq. 11) of an oscillating specimen (FaultDetector.set_innovation_tests)."""
+        on = not spec.enabled
+        if on != self.detector.innovation_tests:
+            self._events.append("fault detection: " + (
+                "innovation tests on again (specimen fixed)" if on else
+                "with the specimen oscillating the averaged model cannot explain the TCs sample by sample; "
+                "only TCs that drop out or stick are detected until it stops"))
+        self.detector.set_innovation_tests(on)
+
     def _on_detections(self, t: float, detections: Sequence[Any]) -> None:
         """Report the detector's decisions; a lamp group's new state re-plans the feedforward without it."""
         for d in detections:
@@ -338,7 +357,8 @@ class ClosedLoop:
         if lamps:
             self._lamp_gains = self.detector.lamp_gains.copy()
             what = ", ".join(f"{d.target} {d.kind}" for d in lamps)
-            self._start_replan(self._oscillation, f"lamp group {what} at t = {t:.1f} s")
+            # the integrator made up for the lost power until now; the new plan models it
+            self._start_replan(self._oscillation, f"lamp group {what} at t = {t:.1f} s", fresh_integrator=True)
 
     def set_faults(self, faults: Sequence[FaultSpec]) -> None:
         """Inject ``faults`` into the furnace from the next sample on (``at`` counts from then; empty clears).
