@@ -159,12 +159,10 @@ class FaultDetector:
     def set_innovation_tests(self, enabled: bool) -> None:
         """Run the GLR tests or not (the reading tests always run).  The loop turns them off while the
         estimator's model cannot explain its innovations: the averaged model (eq. 11) of an oscillating
-        specimen misses the heating at each position, and its innovations are coloured enough (kappa up
-        to 30, docs/faults.md) to pass for faults during the heat-up."""
+        specimen misses the heating at each position, and while it heats up its innovations are coloured
+        enough (kappa up to 30, docs/faults.md) to pass for faults."""
         if enabled != self.innovation_tests:
-            self.banks.reset()
-            self._block, self._block_means, self._ready = [], [], False
-            self.inflation = np.ones(N_EKF_TCS)
+            self.banks.reset()  # the colour of the innovations (inflation) is followed all along
         self.innovation_tests = enabled
 
     # ------------------------------------------------------------------ 1. reading tests

@@ -41,7 +41,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -51,6 +51,7 @@ from twin.config import FurnaceConfig
 from twin.furnace.interface import FaultInjectable, Furnace, Readings
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.fault_ride_through import detection_mode_event, faulty_model, innovation_tests_wanted, reach_note
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
@@ -145,7 +146,7 @@ class ClosedLoop:
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimator = Estimator(self._ctl.nominal, cfg, theta0)
         self.detector = FaultDetector(cfg, self._ctl.nominal)
-        self._motion_for_detection(scenario.oscillation)
+        self._motion_for_detection(0.0)
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -193,32 +194,19 @@ class ClosedLoop:
 
         nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
         gains_now = self._lamp_gains.copy()
-        faulty = bool(np.any(gains_now < 1.0))
-        model = replace(nominal, B=nominal.B * gains_now[None, :]) if faulty else nominal
+        model = faulty_model(nominal, gains_now)  # the groups as the fault detection believes them
+        faulty = model is not nominal
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, best_effort=faulty)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Plan(model, plan, gains, nominal, self._reach_note(model, ref_fn) if faulty else "")
-
-    def _reach_note(self, model: Any, ref_fn: Callable[[Any], Any]) -> str:
-        """What the lamp groups left can hold (fillet mean at full power) against the reference's end."""
-        from twin.control.reference import reachable_range
-
-        names = [g.name for g in self.cfg.lamps.groups]
-        lost = ", ".join(f"{n} {'failed' if k == 0 else f'at {k:.0%}'}" for n, k in zip(names, self._lamp_gains,
-                                                                                        strict=True) if k < 1.0)
-        try:
-            top = reachable_range(model, self.cfg)[1]
-        except Exception as exc:  # no steady state at full power: say so, keep the plan
-            return f"with {lost}: the reachable fillet mean is unknown ({exc})"
-        T_end = float(np.max(self._ref_samples[self.j:])) if self.j < len(self._ref_samples) else float(
-            np.asarray(ref_fn(np.array([self.j * self.t_s])))[0])
-        if T_end > top:
-            return (f"with {lost} the groups left hold at most {top:.0f} K (fillet mean): the reference's "
-                    f"{T_end:.0f} K is out of reach")
-        return f"with {lost} the groups left hold up to {top:.0f} K: the reference ({T_end:.0f} K) stays reachable"
+        note = ""
+        if faulty:
+            rest = np.append(np.arange(t0, self.n_steps * self.t_s, 1.0), self.n_steps * self.t_s)
+            T_end = float(np.max(np.asarray(ref_fn(rest), float)))  # the hottest the rest of the run asks for
+            note = reach_note(self.cfg, model, gains_now, T_end)
+        return _Plan(model, plan, gains, nominal, note)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> None:
@@ -266,7 +254,6 @@ class ClosedLoop:
         self.estimator.set_model(ctl.nominal)
         if motion_changed:
             self.detector.set_model(ctl.nominal)
-            self._motion_for_detection(self._oscillation)
         self._events.append(f"re-planned ({description}): {ctl.plan.status}" + (f"; {ctl.note}" if ctl.note else ""))
 
     def _poll_pending(self) -> None:
@@ -304,6 +291,7 @@ class ClosedLoop:
             if isinstance(self.furnace, FaultInjectable):  # the furnace's own account, for the record only
                 self._events.extend(self.furnace.take_fault_events())
             c0 = time.perf_counter()
+            self._motion_for_detection(t)
             y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)
             theta_prior = self.estimator.state.theta
             state = self.estimator.update(y)  # eq. 13 (faulty readings gated inside)
@@ -338,15 +326,13 @@ class ClosedLoop:
             self.j += 1
             return snap
 
-    def _motion_for_detection(self, spec: OscillationSpec) -> None:
-        """The innovation tests only while the estimator's model explains its innovations: not with the
-        averaged model (eq. 11) of an oscillating specimen (FaultDetector.set_innovation_tests)."""
-        on = not spec.enabled
+    def _motion_for_detection(self, t: float) -> None:
+        """The detector's innovation tests while the estimator's model explains its innovations
+        (:func:`twin.runs.fault_ride_through.innovation_tests_wanted`)."""
+        osc = self._oscillation.enabled
+        on = innovation_tests_wanted(osc, t, float(getattr(self._ref_fn, "t_end", 0.0)))
         if on != self.detector.innovation_tests:
-            self._events.append("fault detection: " + (
-                "innovation tests on again (specimen fixed)" if on else
-                "with the specimen oscillating the averaged model cannot explain the TCs sample by sample; "
-                "only TCs that drop out or stick are detected until it stops"))
+            self._events.append(detection_mode_event(on, osc))
         self.detector.set_innovation_tests(on)
 
     def _on_detections(self, t: float, detections: Sequence[Any]) -> None:
