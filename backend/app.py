@@ -20,13 +20,16 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
 from backend.routes import dashboard, files, furnace, health, runs, stream
 from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
-from backend.run_worker import ChangeRejected, LoopFactory
+from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
+from backend.security import SecurityMiddleware
 from backend.settings import Settings
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
@@ -39,6 +42,7 @@ ERRORS: dict[type[Exception], int] = {
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
+    ChangeCancelled: status.HTTP_409_CONFLICT,
 }
 
 
@@ -100,4 +104,6 @@ def create_app(
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
+    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

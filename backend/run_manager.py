@@ -33,6 +33,7 @@ from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
 from twin.scenario import OscillationSpec, Reference, Scenario, check
 
@@ -155,6 +156,13 @@ class RunManager:
                 await asyncio.to_thread(check, self.cfg, scenario.reference)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
+        check_plan = getattr(self.loop_factory, "check_plan", None)
+        if callable(check_plan):  # the first plan within this server's time and memory (twin.control.budget)
+            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
+            try:
+                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
+            except ValueError as exc:
+                raise LimitExceeded(f"reference: {exc}") from None
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -242,6 +250,9 @@ class RunManager:
             final = "interrupted"
             error = "the server shut down during the run"
             raise
+        except PlanCancelled:  # stopped (or shut down) while the first plan was being made
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down during the run" if self._shutting_down else None
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"
@@ -281,7 +292,9 @@ class RunManager:
         run.wake.set()
 
     async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned.
+        """Queue a reference / oscillation change; wait (bounded) until it is in force (``applied``), a later
+        change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in the
+        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`.
 
         A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
         run = self._active(run_id)

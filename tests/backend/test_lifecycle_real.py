@@ -27,7 +27,7 @@ OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory, small_cfg):
     data = tmp_path_factory.mktemp("lifecycle")
-    with TestClient(create_app(Settings(data_dir=data), small_cfg)) as c:
+    with TestClient(create_app(Settings(data_dir=data), small_cfg), base_url="http://127.0.0.1") as c:
         r = c.post("/api/runs", json=SCENARIO)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
@@ -144,7 +144,7 @@ def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
 def test_unreachable_reference_is_refused_before_a_run_starts(tmp_path, small_cfg) -> None:
     """With the real loop factory, POST checks the reference against the furnace's reachable range:
     a 422 that says why, instead of a run that would end in error while building its loop."""
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg)) as c:
+    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg), base_url="http://127.0.0.1") as c:
         # 260 K is colder than every surface around the specimen (pydantic allows 250 K and up)
         r = c.post("/api/runs", json={"reference": {"points": [[5.0, 900.0], [10.0, 260.0]]}})
         assert r.status_code == 422, r.text
