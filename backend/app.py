@@ -27,7 +27,14 @@ from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
 from backend.routes import dashboard, files, furnace, health, runs, stream
-from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
+from backend.run_manager import (
+    InsufficientStorage,
+    LimitExceeded,
+    RunManager,
+    RunNotActive,
+    RunNotFound,
+    TooManyRuns,
+)
 from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
 from backend.security import SecurityMiddleware
 from backend.settings import Settings
@@ -43,6 +50,7 @@ ERRORS: dict[type[Exception], int] = {
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeCancelled: status.HTTP_409_CONFLICT,
+    InsufficientStorage: status.HTTP_507_INSUFFICIENT_STORAGE,
 }
 
 
@@ -73,6 +81,7 @@ def create_app(
         recover_interrupted(repo, settings.runs_dir)
         manager = RunManager(settings, cfg, repo, loop_factory, limits=limits,
                              event_loop=asyncio.get_running_loop())
+        await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
         app.state.manager = manager
         app.state.viser_url = None
         scene = None

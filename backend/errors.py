@@ -8,7 +8,7 @@ Example
 -------
 >>> echo(float("nan")), echo(1e999), echo([1.0] * 1000)
 ('NaN', 'Infinity', 'list of 1000 items')
->>> echo("x" * 500)[-12:]
+>>> echo("x" * 500)[-13:]
 '… (500 chars)'
 """
 

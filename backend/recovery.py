@@ -12,6 +12,7 @@ from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
 from twin.runs.metrics import compute_metrics
 from twin.runs.record import load_arrays
+from twin.runs.series_store import consolidate, has_parts
 
 log = logging.getLogger(__name__)
 
@@ -21,6 +22,11 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
     ids = repo.mark_interrupted()
     for run_id in ids:
         files = RunFiles(runs_dir / run_id)
+        if has_parts(files.folder):  # what was flushed before the crash, as one timeseries.npz
+            try:
+                consolidate(files.folder, files.timeseries)
+            except Exception as exc:
+                log.warning("run %s: cannot consolidate its time series: %s", run_id, exc)
         if not files.timeseries.is_file():
             continue
         try:

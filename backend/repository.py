@@ -132,6 +132,15 @@ class RunRepository:
         cur = self._exec("SELECT * FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
         return [self._run(r) for r in cur.fetchall()]
 
+    def runs_created_before(self, cutoff: float) -> list[RunRow]:
+        cur = self._exec("SELECT * FROM runs WHERE created_at < ? ORDER BY created_at", (cutoff,))
+        return [self._run(r) for r in cur.fetchall()]
+
+    def delete_run(self, run_id: str) -> None:
+        """Remove a run and its changes (retention)."""
+        self._exec("DELETE FROM changes WHERE run_id=?", (run_id,))
+        self._exec("DELETE FROM runs WHERE id=?", (run_id,))
+
     def count_active(self) -> int:
         marks = ",".join("?" * len(ACTIVE_STATUSES))
         cur = self._exec(f"SELECT COUNT(*) FROM runs WHERE status IN ({marks})", ACTIVE_STATUSES)

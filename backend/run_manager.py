@@ -32,6 +32,7 @@ from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
+from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
@@ -53,6 +54,10 @@ class RunNotActive(RuntimeError):
 
 class TooManyRuns(RuntimeError):
     """``max_concurrent_runs`` runs are already going (429)."""
+
+
+class InsufficientStorage(RuntimeError):
+    """The data directory's quota or the disk's free space has no room for the run (507)."""
 
 
 class LimitExceeded(ValueError):
@@ -126,6 +131,8 @@ class RunManager:
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
         self._shutting_down = False
+        #: the data directory's usage, quota, free space and retention (backend.storage)
+        self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
     def files(self, run_id: str) -> RunFiles:
         return RunFiles(self.settings.runs_dir / run_id)
@@ -167,13 +174,20 @@ class RunManager:
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
+        await asyncio.to_thread(self.disk.apply_retention, self._repo, self.settings.runs_dir)
+        need = run_bytes(self.cfg, scenario.duration, self.settings.recording_image_interval_s)
+        need += sum(run_bytes(self.cfg, a.worker.scenario.duration) for a in self._runs.values())  # still to come
+        problem = await asyncio.to_thread(self.disk.room_for, need)
+        if problem is not None:
+            raise InsufficientStorage(problem)
         self._loop = asyncio.get_running_loop()
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
         files.folder.mkdir(parents=True, exist_ok=True)
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
-        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory)
+        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
+                           disk=self.disk)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),

@@ -31,9 +31,11 @@ from backend.recording import RecordingSink
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.settings import Settings
+from backend.storage import DataDir
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.runs.replanning import Superseded
+from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -65,6 +67,10 @@ class LoopFactory(Protocol):
 class ChangeRejected(ValueError):
     """The loop refused a change, or could not plan it (an unreachable reference, a plan beyond the
     server's time or memory, a failed solve); nothing of it was applied."""
+
+
+class DiskFull(RuntimeError):
+    """The data directory passed its quota, or the disk its free-space reserve, during the run."""
 
 
 class ChangeCancelled(RuntimeError):
@@ -104,8 +110,11 @@ class RunWorker:
         repo: RunRepository,
         files: RunFiles,
         loop_factory: LoopFactory,
+        *,
+        disk: DataDir | None = None,
     ) -> None:
         self.run_id = run_id
+        self.disk = disk
         self.scenario = scenario
         self.cfg = cfg
         self.settings = settings
@@ -126,6 +135,7 @@ class RunWorker:
         self._origin_wall = 0.0
         self._origin_t = 0.0
         self._last_flush = 0.0
+        self.series = SeriesStore(files.folder)  # the time series, appended at each flush
 
     # ---- set-up (worker thread) ----
     def build(self) -> None:
@@ -261,6 +271,9 @@ class RunWorker:
                 break
         if time.monotonic() - self._last_flush >= self.settings.flush_interval_s:
             self.flush()
+            problem = None if self.disk is None else self.disk.over()
+            if problem is not None:
+                raise DiskFull(f"{problem}: the run was stopped, its data so far kept")
         return Advance(self.latest, self.seq, self.latest_wall, steps, tuple(samples), self._finished(),
                        max(wait, 0.0))
 
@@ -273,10 +286,13 @@ class RunWorker:
         return data
 
     def flush(self, metrics: dict[str, Any] | None = None) -> None:
-        """Write the time series so far, the latest values and the recording's buffer to disk."""
+        """Append the new samples to the time series (``twin.runs.series_store``), store the latest values and
+        push the recording's buffer to disk."""
         self._last_flush = time.monotonic()
-        data = self._timeseries()
-        if data is not None:
+        record = getattr(self.loop, "record", None)
+        if record is not None and self.latest is not None:
+            self.series.append(record)
+        elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
             write_npz_atomic(self.files.timeseries, data)
         if self.recording is not None:
             self.recording.flush()
@@ -295,6 +311,7 @@ class RunWorker:
             write_json_atomic(self.files.metrics, metrics)
         try:
             self.flush(metrics)
+            consolidate(self.files.folder, self.files.timeseries)  # timeseries.npz of product.md
         finally:
             if self.recording is not None:
                 self.recording.close()

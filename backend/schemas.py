@@ -13,6 +13,9 @@ class Health(BaseModel):
     max_concurrent_runs: int
     viser_url: str | None = Field(None, description="the 3D view, when it runs")
     auth_required: bool = Field(description="mutating endpoints need the API token")
+    disk: dict[str, Any] = Field(default_factory=dict,
+                                 description="data directory: used_mb, free_mb (its disk), quota_mb, min_free_mb, "
+                                             "retention_days")
     reads_need_token: bool = Field(False, description="every /api read and the stream need the token too "
                                                       "(the server listens beyond loopback)")
 

@@ -53,6 +53,7 @@ from twin.control.budget import PlanBudget
 from twin.furnace.interface import Furnace, Readings
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
 from twin.scenario import OscillationSpec, Reference, Scenario
@@ -154,6 +155,7 @@ class ClosedLoop:
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
         self.record = RunRecord(header, has_truth=self._has_truth)
+        self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 
@@ -300,6 +302,10 @@ class ClosedLoop:
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events,
             )
+            problem = self._guard.check(snap)
+            if problem is not None:  # nothing of this sample reaches the furnace or the record
+                self.furnace.apply(np.zeros_like(snap.u), t)
+                raise EstimateDiverged(f"t = {t:.1f} s: {problem}; the lamps were switched off")
             self.record.append(snap)
 
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
