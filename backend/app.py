@@ -26,7 +26,7 @@ from fastapi.responses import JSONResponse
 from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, files, furnace, health, runs, stream
+from backend.routes import dashboard, docs, files, furnace, health, runs, stream
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
@@ -88,8 +88,10 @@ def create_app(
         if viser and settings.viser_port:
             from backend.viser import FurnaceView
 
-            # always loopback: the 3D view has no token check, so it must not be reachable from the network
-            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port)
+            # always loopback; its gate checks Host and Origin, and with a token only windows that entered it act
+            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port, token=settings.api_token,
+                                allowed_hosts=tuple(settings.allowed_hosts),
+                                allowed_origins=tuple(settings.allowed_origins))
             scene.start()
             app.state.viser_url = scene.url
         app.state.viser = scene
@@ -107,9 +109,11 @@ def create_app(
         description="Live digital twin of the oscillating infrared annealing furnace "
         "(Jadachowski, Steinboeck, Kugi, CEP 78, 2018): runs, live stream, recordings.",
         lifespan=lifespan,
+        docs_url=None,  # backend/routes/docs.py: the same pages with their scripts from an installed package
+        redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, dashboard):
+    for module in (health, furnace, runs, files, stream, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)

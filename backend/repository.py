@@ -153,11 +153,14 @@ class RunRepository:
         ids = [r[0] for r in cur.fetchall()]
         for run_id in ids:
             self._exec(
-                "UPDATE runs SET status='interrupted', "
+                "UPDATE runs SET status='interrupted', ended_at=COALESCE(ended_at, ?), "
                 "error=COALESCE(error, 'the server stopped while the run was going') WHERE id=?",
-                (run_id,),
+                (time.time(), run_id),
             )
         return ids
+
+    def set_ended_at(self, run_id: str, t: float) -> None:
+        self._exec("UPDATE runs SET ended_at=? WHERE id=?", (t, run_id))
 
     def add_change(self, run_id: str, kind: str, body: dict[str, Any]) -> int:
         cur = self._exec(

@@ -38,6 +38,7 @@ from __future__ import annotations
 import logging
 import shutil
 import uuid
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -96,7 +97,7 @@ def load_parts(folder: Path) -> dict[str, Any]:
     for part in sorted(d.glob("part-*.npz")):
         try:
             arrays = load_arrays(part)
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:
             log.warning("%s is unreadable (%s): the series ends before it", part, exc)
             break
         for k, v in arrays.items():
