@@ -253,6 +253,12 @@ class RunWorker:
         while not self.stop_requested.is_set() and not self._finished():
             if self._apply_changes():
                 self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
+            if self.speed is None and getattr(self.loop, "replanning", False):
+                # at speed max simulated time waits for a re-plan (free here), so the plan is not stale
+                # when it comes in and a change counts from the sample it was asked at; in real time
+                # the furnace goes on under the old plan
+                wait = 0.02
+                break
             next_t = (float(self.latest.t) if self.latest is not None else 0.0) + t_s
             if self.speed is not None:
                 due = self._origin_wall + (next_t - self._origin_t) / self.speed

@@ -66,18 +66,45 @@ def test_finding_01_stop_acts_while_starting(tmp_path, small_cfg) -> None:
         assert stopped_after < 10.0, stopped_after
 
 
-def test_finding_10_put_answers_when_planned(tmp_path, small_cfg) -> None:
+def test_finding_10_put_answers_when_planned(tmp_path, small_cfg, monkeypatch) -> None:
+    """A re-plan that takes 2 s: the PUT answers after it (applied), or, past the server's wait, 202 pending
+    and the outcome later in the run's changes and events; never "applied" before the plan is in force."""
+    from twin.control import replan as replan_module
+
+    solve = replan_module.solve_feedforward
+
+    def slow(*a, **k):
+        time.sleep(2.0)
+        return solve(*a, **k)
+
     scenario = {"reference": {"setpoint": 800.0, "t_E": 10.0}, "duration": 120.0, "speed": 1.0}
-    with real_client(tmp_path, small_cfg) as c:
+    with real_client(tmp_path, small_cfg, change_timeout_s=0.5) as c:
         run_id = c.post("/api/runs", json=scenario).json()["id"]
         wait_status(c, run_id, {"running"}, timeout=180.0)
+        monkeypatch.setattr(replan_module, "solve_feedforward", slow)
+        t0 = time.monotonic()
         r = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 700.0, "t_E": 5.0})
-        assert r.status_code == 200, r.text
-        out = r.json()
-        assert out["status"] == "applied" and out["applied_t"] > 0.0
+        assert r.status_code == 202 and r.json()["status"] == "pending", r.text
+        assert c.get(f"/api/runs/{run_id}").json()["changes"][0]["status"] == "pending"
+        assert c.get(f"/api/runs/{run_id}").json()["reference"] == scenario["reference"]  # not yet in force
+        end = time.monotonic() + 120
+        while c.get(f"/api/runs/{run_id}").json()["changes"][0]["status"] == "pending" and time.monotonic() < end:
+            time.sleep(0.1)
+        assert time.monotonic() - t0 >= 2.0
         run = c.get(f"/api/runs/{run_id}").json()
+        change = run["changes"][0]
+        assert change["status"] == "applied" and change["applied_t"] > 0.0
         assert run["reference"] == {"setpoint": 700.0, "t_E": 5.0}
-        assert [(ch["status"], ch["applied_t"]) for ch in run["changes"]] == [("applied", out["applied_t"])]
+        c.post(f"/api/runs/{run_id}/stop")
+        wait_status(c, run_id, {"stopped"})
+    with real_client(tmp_path / "b", small_cfg) as c:
+        run_id = c.post("/api/runs", json=scenario).json()["id"]
+        wait_status(c, run_id, {"running"}, timeout=180.0)
+        t0 = time.monotonic()
+        r = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 700.0, "t_E": 5.0})
+        assert r.status_code == 200 and r.json()["status"] == "applied", r.text
+        assert time.monotonic() - t0 >= 2.0  # it waited for the 2 s plan
+        assert c.get(f"/api/runs/{run_id}").json()["changes"][0]["applied_t"] == r.json()["applied_t"]
         c.post(f"/api/runs/{run_id}/stop")
         wait_status(c, run_id, {"stopped"})
 

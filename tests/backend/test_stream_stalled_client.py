@@ -33,7 +33,8 @@ async def stalled_client(app, path: str, accepted: list[bool]) -> None:
         await asyncio.Event().wait()  # a frame was handed over: this client never takes it
 
     scope = {"type": "websocket", "path": path, "raw_path": path.encode(), "query_string": b"",
-             "headers": [], "scheme": "ws", "server": ("testserver", 80), "client": ("stalled", 1),
+             "headers": [(b"host", b"127.0.0.1")], "scheme": "ws", "server": ("127.0.0.1", 80),
+             "client": ("stalled", 1),
              "root_path": "", "subprotocols": [], "asgi": {"version": "3.0"}, "state": {}}
     await app(scope, receive, send)
 

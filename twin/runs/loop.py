@@ -22,7 +22,9 @@ re-planned (feedforward, reference state, gains, model) from the current estimat
 background thread when ``background=True`` (the backend) so the loop never stalls, and take
 effect together -- reference, furnace motion and plan -- at the first sample after the plan is
 ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing).
-Each returns a future of the run time at which the change took effect.  Plans never reach
+Each returns a future of the run time from which the change counts: a reference's own start (the
+sample at which it was asked for: the plan starts there, a points reference's times count from there),
+the motion's switch.  Plans never reach
 far beyond the run's end, and a :class:`twin.control.budget.PlanBudget` bounds and cancels them.
 
 Example
@@ -207,7 +209,7 @@ class ClosedLoop:
             T_now = float(self._ctl.model.c_m @ self.estimator.state.theta)
             ref_fn = self._make_reference(spec, T_now, t_start=t_now)
             self._wanted_reference = (spec, ref_fn)
-            return self._request("reference", f"reference changed at t = {t_now:.1f} s")
+            return self._request("reference", f"reference change requested at t = {t_now:.1f} s")
 
     def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
         """Switch the specimen motion; the motion, model, plan and gains switch together once re-planned.
@@ -231,8 +233,10 @@ class ClosedLoop:
         def job(budget: PlanBudget) -> _Plan:
             return self._plan(spec, theta, t0, ref_fn, previous, budget=budget)
 
-        def install(ctl: _Plan, kinds: list[str]) -> float:
-            t = self.j * self.t_s  # the sample about to be computed is the first that uses it
+        def install(ctl: _Plan, kinds: list[str]) -> dict[str, float]:
+            t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
+            # a reference counts from when it was asked for (its plan starts there); the motion switches now
+            t_ref = float(getattr(wanted_ref[1], "t_start", t)) if wanted_ref is not None else t
             if wanted_ref is not None and wanted_ref is self._wanted_reference:
                 self._reference_spec = wanted_ref[0]
                 self._set_ref_fn(wanted_ref[1])
@@ -242,8 +246,11 @@ class ClosedLoop:
             if spec != self._oscillation:
                 self._oscillation = spec
                 self.furnace.set_oscillation(spec, t)
-            self._install(ctl, f"{' and '.join(kinds)} from t = {t:.1f} s")
-            return t
+            late = f", plan in force from t = {t:.1f} s" if t_ref < t - 1e-9 else ""
+            said = {"reference": f"reference changed at t = {t_ref:.1f} s{late}",
+                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s"}
+            self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
+            return {"reference": t_ref, "oscillation": t}
 
         def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
             self._wanted_reference, self._wanted_oscillation = None, None

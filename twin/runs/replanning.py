@@ -4,9 +4,10 @@ A change (new reference, new oscillation) needs a new plan (feedforward, gains, 
 (:class:`twin.runs.loop.ClosedLoop`) keeps running on its old plan until the new one is ready, then
 switches reference, motion and plan together at one sample.  :class:`Replanner` schedules those jobs:
 
-* every change gets a :class:`concurrent.futures.Future` that resolves with the run time of the first
-  sample that uses it (``applied``), or fails: :class:`Superseded` when a later change of the same kind
-  replaced it before it was planned, :class:`twin.control.budget.PlanCancelled` when the run stopped, or
+* every change gets a :class:`concurrent.futures.Future` that resolves with the run time from which it
+  counts (``applied``; the loop says which: a reference's own start, the motion's switch), or fails:
+  :class:`Superseded` when a later change of the same kind replaced it before it was planned,
+  :class:`twin.control.budget.PlanCancelled` when the run stopped, or
   the planning error (``PlanTooLarge``, ``FeedforwardError``, ...): then nothing of it was applied;
 * a new change cancels the job in progress (its :class:`twin.control.budget.PlanBudget` token: it stops
   within milliseconds) and plans the latest wanted state instead, so a burst of changes costs one plan;
@@ -36,7 +37,8 @@ from twin.control.budget import PlanBudget, PlanCancelled
 log = logging.getLogger(__name__)
 
 Job = Callable[[PlanBudget], Any]  # plans with the given budget (it raises PlanCancelled when told to stop)
-Install = Callable[[Any, list[str]], float]  # installs a plan at a sample boundary; returns its run time
+#: installs a plan at a sample boundary; returns the run time from which each kind's change counts
+Install = Callable[[Any, list[str]], "float | dict[str, float]"]
 OnFail = Callable[[BaseException, list[str]], None]  # a job failed or was cancelled: nothing was installed
 
 
@@ -129,10 +131,10 @@ class Replanner:
             if r.on_fail is not None:
                 r.on_fail(exc, kinds)
             return
-        t_applied = r.install(plan, kinds)
+        applied = r.install(plan, kinds)
         for t in r.tickets:
             if not t.future.done():
-                t.future.set_result(t_applied)
+                t.future.set_result(applied[t.kind] if isinstance(applied, dict) else applied)
 
     def close(self, reason: str = "the run ended") -> None:
         """Cancel the job in progress; its changes fail with :class:`PlanCancelled`."""
