@@ -75,7 +75,7 @@ class DefaultLoopFactory:
         model = discrete_model(cfg, self.radiation(cfg), None)  # same size and cost as the averaged one
         T0 = float(cfg.specimen.initial_temperature)
         ref = reference_trajectory(scenario.reference, T0)
-        budget.refuse_if_too_large(plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration))
+        plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
         from twin.runs.loop import ClosedLoop

@@ -47,7 +47,7 @@ class Settings(BaseSettings):
                                        description="origins besides the server's own allowed to change runs "
                                                    "(e.g. '[\"https://proxy.lab\"]')")
     max_body_bytes: int = Field(1 << 20, ge=1024, description="largest request body (bytes); larger -> 413")
-    plan_max_s: float = Field(60.0, gt=0, description="wall time a feedforward plan (start or re-plan) may take (s)")
+    plan_max_s: float = Field(120.0, gt=0, description="wall time a feedforward plan (start or re-plan) may take (s)")
     plan_max_mb: float = Field(1024.0, gt=0, description="memory a feedforward plan may take (MB, estimated "
                                                          "before solving); more -> 422")
     data_quota_mb: float = Field(10240.0, gt=0, description="most the data directory may hold (MB); a run that "

@@ -239,3 +239,22 @@ def test_finding_12_reads_need_the_token_beyond_loopback(tmp_path, small_cfg) ->
     with client(tmp_path, small_cfg, api_token=TOKEN) as c:  # on loopback reads stay open, changes need it
         assert c.get("/api/runs").status_code == 200
         assert c.post("/api/runs", json={"duration": 0.5}).status_code == 401
+
+
+# ---- finding 11: /docs and /redoc loaded swagger-ui, redoc and fonts from a CDN ----
+def test_finding_11_api_docs_without_cdn(tmp_path, small_cfg) -> None:
+    import re
+
+    with client(tmp_path, small_cfg) as c:
+        for page in ("/docs", "/redoc"):
+            html = c.get(page).text
+            urls = re.findall(r'(?:src|href)="([^"]+)"', html) + re.findall(r"url: '([^']+)'", html)
+            assert urls, page
+            assert not [u for u in urls if u.startswith(("http:", "https:", "//"))], (page, urls)
+            assert "cdn" not in html and "googleapis" not in html, page
+            for u in urls:
+                if u.startswith("/docs-assets/"):
+                    r = c.get(u)
+                    assert r.status_code == 200 and len(r.content) > 1000, u
+        assert c.get("/docs-assets/../settings.py").status_code == 404
+        assert c.get("/openapi.json").json()["info"]["title"] == "furnace-twin"

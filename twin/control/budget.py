@@ -20,12 +20,15 @@ Example
 >>> child.cancel.cancel()
 >>> child.cancelled, budget.cancelled
 (True, False)
->>> est = PlanEstimate(horizon_s=144.0, knots=144, substeps=144, samples=1440, n=105, m=6, jacobian_s=3e-4,
-...                    flop_s=1e-10)      # the default run on a machine of 10 GFLOP/s
+>>> est = PlanEstimate(horizon_s=144.0, knots=144, substeps=144, samples=1440, n=105, m=6, sweep_s=0.5,
+...                    jacobian_s=3e-4, riccati_s=2e-4)      # the default run, a sweep of 0.5 s
 >>> round(est.memory_mb), round(est.seconds, 1)
-(56, 11.7)
+(56, 15.3)
 >>> budget.problem(est) is None
 True
+>>> print(budget.problem(PlanEstimate(4320.0, 240, 1440, 43200, 105, 6, sweep_s=3.0)))  # doctest: +NORMALIZE_WHITESPACE
+a plan over 4320 s (240 knots, 43200 samples) would take about 90 s to compute on this machine now,
+this server allows 60 s: shorten the run or the transition
 """
 
 from __future__ import annotations
@@ -63,11 +66,11 @@ class CancelToken:
         return self._own.is_set() or any(s.is_set() for s in self._sources)
 
 
-#: Sweeps (cost, gradient, Hessian) and cost-only simulations of a typical OCP solve, measured on the
-#: default and the small furnace: 41 sweeps and 58-63 simulations in 30-40 IPOPT iterations (docstring
-#: of twin.control.feedforward).  The estimate is of a typical solve; the wall-time limit stops the rest.
-TYPICAL_SWEEPS = 45
-TYPICAL_SIMULATIONS = 65
+#: Sweeps (cost, gradient, Hessian) of a typical OCP solve: measured 10-41 on the default and the small
+#: furnace (30-40 IPOPT iterations; warm starts and short horizons need fewer).  The cost-only simulations
+#: (about as many) cost a small fraction of a sweep.  The estimate is of a typical solve; the wall-time
+#: limit stops an atypical one.
+TYPICAL_SWEEPS = 30
 #: Held Jacobians of the LQG design (twin.control.replan.JACOBIAN_EVERY)
 GAINS_JACOBIAN_EVERY = 10
 #: Dense float64 (n_params)^2 matrices of a sweep: the Gauss-Newton Hessian, the input curvature, IPOPT's
@@ -78,15 +81,12 @@ HESSIAN_COPIES = 4
 @dataclass(frozen=True)
 class PlanEstimate:
     """Size of one plan (horizon, knots K, Heun substeps, fine samples N of an n-state, m-input model) and
-    what it costs.  ``jacobian_s`` (a dF/dtheta, dF/du pair) and ``flop_s`` (seconds per floating-point
-    operation of an n x n by n x (m + K) product) are measured when the estimate is made, so it follows
-    the machine and its load.
+    what it costs.
 
-    Per sweep (:class:`twin.control.shooting.CoarseShooting`), with p = m + K parameters of which on
-    average m + K / 2 act: two Jacobian pairs and two forward-sensitivity products (4 n^2 p flops) per
-    substep, the residual rows per knot (2 n^2 p) and the Gauss-Newton product 2 K (n + 1) p^2; the
-    simulations cost only model steps (negligible).  The gains: one Jacobian pair every
-    ``GAINS_JACOBIAN_EVERY`` samples and a Riccati step (about 8 (n + 1)^3 flops) per sample.
+    The time comes from the real code on this machine now (so it follows its load): ``sweep_s`` is one
+    sweep of this very OCP (cost, gradient and Hessian over the whole horizon: :meth:`twin.control.
+    feedforward.PlanGrid.estimate` with ``timed=True``), ``jacobian_s`` a Jacobian pair of the model and
+    ``riccati_s`` one step of the gains' recursion.  ``None`` until measured.
     """
 
     horizon_s: float
@@ -95,8 +95,9 @@ class PlanEstimate:
     samples: int  # fine samples of the plan (and of its gains)
     n: int
     m: int
-    jacobian_s: float
-    flop_s: float
+    sweep_s: float | None = None
+    jacobian_s: float = 0.0
+    riccati_s: float = 0.0
 
     @property
     def memory_mb(self) -> float:
@@ -109,14 +110,12 @@ class PlanEstimate:
         return 8.0 * words / 1e6
 
     @property
-    def seconds(self) -> float:
-        """Typical wall time of the OCP and the gains (class docstring)."""
-        K, n, m, N = self.knots, self.n, self.m, self.samples
-        p, p_mean = m + K, m + K / 2
-        sweep_flops = self.substeps * 4 * n * n * p_mean + K * 2 * n * n * p_mean + 2 * K * (n + 1) * p * p
-        sweep_s = self.substeps * 2 * self.jacobian_s + sweep_flops * self.flop_s
-        gains_s = N / GAINS_JACOBIAN_EVERY * self.jacobian_s + N * 8 * (n + 1) ** 3 * self.flop_s
-        return TYPICAL_SWEEPS * sweep_s + gains_s
+    def seconds(self) -> float | None:
+        """Typical wall time: ``TYPICAL_SWEEPS`` sweeps, then the gains (``None`` if not measured)."""
+        if self.sweep_s is None:
+            return None
+        gains_s = self.samples / GAINS_JACOBIAN_EVERY * self.jacobian_s + self.samples * self.riccati_s
+        return TYPICAL_SWEEPS * self.sweep_s + gains_s
 
 
 @dataclass(frozen=True)
@@ -162,7 +161,7 @@ class PlanBudget:
         if est.memory_mb > self.max_memory_mb:
             return (f"{what} needs about {est.memory_mb:.0f} MB, this server allows {self.max_memory_mb:g} MB: "
                     f"shorten the run or the transition")
-        if est.seconds > self.max_wall_s:
+        if est.seconds is not None and est.seconds > self.max_wall_s:
             return (f"{what} would take about {est.seconds:.0f} s to compute on this machine now, this server "
                     f"allows {self.max_wall_s:g} s: shorten the run or the transition")
         return None

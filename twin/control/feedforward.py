@@ -60,6 +60,7 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -150,30 +151,50 @@ class PlanGrid:
     T_final: float  # K
     T_hot: float  # hottest temperature planned for (K)
 
-    def estimate(self, model: DiscreteDynamics, jacobian_s: float | None = None,
-                 flop_s: float | None = None) -> PlanEstimate:
-        """Size and typical cost of the plan on this grid (:class:`twin.control.budget.PlanEstimate`); the
-        model's Jacobian and this machine's matrix products are timed unless given."""
+    def estimate(self, model: DiscreteDynamics, cfg: FurnaceConfig | None = None, *,
+                 timed: bool = False) -> PlanEstimate:
+        """Size of the plan on this grid (:class:`twin.control.budget.PlanEstimate`); with ``timed=True``
+        (needs ``cfg``) also its typical cost: one sweep of this OCP is run and timed (it allocates the
+        arrays :attr:`PlanEstimate.memory_mb` counts: check that first), and a Jacobian pair and a Riccati step."""
         substeps = max(1, int(round(self.interval / model.t_s)))
-        th = np.full(model.n, self.T_final)
-        u = np.full(model.m, 0.5)
-        if jacobian_s is None:
-            jacobian_s = _seconds(lambda: (model.jac_theta(th, u), model.jac_u(th, u)))
-        if flop_s is None:
-            a, b = np.ones((model.n, model.n)), np.ones((model.n, model.m + self.K))
-            flop_s = _seconds(lambda: a @ b) / (2.0 * model.n * model.n * (model.m + self.K))
-        return PlanEstimate(horizon_s=self.horizon, knots=self.K, substeps=self.K * self.n_heun,
-                            samples=self.K * substeps, n=model.n, m=model.m, jacobian_s=jacobian_s, flop_s=flop_s)
+        est = PlanEstimate(horizon_s=self.horizon, knots=self.K, substeps=self.K * self.n_heun,
+                           samples=self.K * substeps, n=model.n, m=model.m)
+        if not timed:
+            return est
+        assert cfg is not None
+        th, u = np.full(model.n, self.T_final), np.full(model.m, 0.5)
+        grid = KnotGrid(self.t0, model.t_s, substeps, self.K)
+        inputs = ScaledDistribution(model.m, self.K, cfg.feedforward.smoothing)
+        shooting = CoarseShooting(model, th, grid.dt, self.n_heun, np.full(self.K + 1, self.T_final),
+                                  knot_weights(grid), cfg.feedforward.g0, cfg.feedforward.g1, inputs)
+        p = np.concatenate([np.full(model.m, 1.0 / model.m), np.full(self.K, 0.5)])
+        sweep_s = _seconds(lambda: shooting.sweep(p), repeat=1)
+        jac_s = _seconds(lambda: (model.jac_theta(th, u), model.jac_u(th, u)))
+        from twin.control.lqg import riccati_step
+
+        n1 = model.n + 1
+        P, Phi, Gam, Q = np.eye(n1), np.eye(n1), np.ones((n1, model.m)), np.eye(n1)
+        riccati_s = _seconds(lambda: riccati_step(P, Phi, Gam, Q, 1.0))
+        return dataclasses.replace(est, sweep_s=sweep_s, jacobian_s=jac_s, riccati_s=riccati_s)
 
 
 def _seconds(f: Callable[[], Any], repeat: int = 5) -> float:
-    """Best of ``repeat`` wall times of ``f()`` (s): the machine's speed now, without the odd outlier."""
-    best = math.inf
+    """Median of ``repeat`` wall times of ``f()`` (s): the machine's speed now, load included."""
+    times = []
     for _ in range(repeat):
         t = time.perf_counter()
         f()
-        best = min(best, time.perf_counter() - t)
-    return best
+        times.append(time.perf_counter() - t)
+    return float(np.median(times))
+
+
+def check_budget(grid: PlanGrid, model: DiscreteDynamics, cfg: FurnaceConfig, budget: PlanBudget) -> PlanEstimate:
+    """Raise :class:`twin.control.budget.PlanTooLarge` if the plan on ``grid`` needs more memory than
+    ``budget`` allows, or (then timed: one sweep) more time; returns the timed estimate."""
+    budget.refuse_if_too_large(grid.estimate(model))
+    est = grid.estimate(model, cfg, timed=True)
+    budget.refuse_if_too_large(est)
+    return est
 
 
 def plan_grid(model: DiscreteDynamics, T_ref_fn: RefFn, t0: float, cfg: FurnaceConfig, *,
@@ -323,7 +344,7 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     pg = plan_grid(model, T_ref_fn, t0, cfg, horizon=horizon, t_stop=t_stop, interval=interval, theta0=th0)
     if budget is not None:
         budget.check("the feedforward plan")
-        budget.refuse_if_too_large(pg.estimate(model))
+        check_budget(pg, model, cfg, budget)
         max_wall_s = min(max_wall_s, max(budget.remaining_s, 1e-3))
     horizon, substeps = pg.horizon, int(round(pg.interval / t_s))
     grid = KnotGrid(float(t0), t_s, substeps, pg.K)

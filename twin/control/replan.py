@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanEstimate
-from twin.control.feedforward import RefFn, plan_grid, solve_feedforward
+from twin.control.feedforward import RefFn, check_budget, plan_grid, solve_feedforward
 from twin.control.lqg import Gains, lqg_gains
 from twin.control.plan import FeedforwardPlan
 
@@ -120,10 +120,13 @@ def replan(
 
 
 def plan_estimate(model: Any, cfg: FurnaceConfig, reference_fn: RefFn, t_now: float, *,
-                  t_stop: float | None = None) -> PlanEstimate:
-    """Size and typical cost of the plan :func:`replan` would make from ``t_now`` (nothing is solved):
-    :meth:`twin.control.feedforward.PlanGrid.estimate` of its grid."""
-    return plan_grid(model, reference_fn, t_now, cfg, t_stop=t_stop).estimate(model)
+                  t_stop: float | None = None, budget: PlanBudget | None = None) -> PlanEstimate:
+    """Size and typical cost of the plan :func:`replan` would make from ``t_now``: with a ``budget``, raises
+    :class:`twin.control.budget.PlanTooLarge` beyond it (its memory is checked before one sweep is timed)."""
+    grid = plan_grid(model, reference_fn, t_now, cfg, t_stop=t_stop)
+    if budget is None:
+        return grid.estimate(model, cfg, timed=True)
+    return check_budget(grid, model, cfg, budget)
 
 
 def replan_seconds(cfg: FurnaceConfig, radiation: Any) -> float:

@@ -22,9 +22,8 @@ re-planned (feedforward, reference state, gains, model) from the current estimat
 background thread when ``background=True`` (the backend) so the loop never stalls, and take
 effect together -- reference, furnace motion and plan -- at the first sample after the plan is
 ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing).
-Each returns a future of the run time from which the change counts: a reference's own start (the
-sample at which it was asked for: the plan starts there, a points reference's times count from there),
-the motion's switch.  Plans never reach
+Each returns a future of the run time of the first sample that uses the change (a points reference's
+times count from there; a plan made for an earlier sample moves there with its reference).  Plans never reach
 far beyond the run's end, and a :class:`twin.control.budget.PlanBudget` bounds and cancels them.
 
 Example
@@ -39,6 +38,7 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -233,24 +233,27 @@ class ClosedLoop:
         def job(budget: PlanBudget) -> _Plan:
             return self._plan(spec, theta, t0, ref_fn, previous, budget=budget)
 
-        def install(ctl: _Plan, kinds: list[str]) -> dict[str, float]:
+        def install(ctl: _Plan, kinds: list[str]) -> float:
             t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
-            # a reference counts from when it was asked for (its plan starts there); the motion switches now
-            t_ref = float(getattr(wanted_ref[1], "t_start", t)) if wanted_ref is not None else t
             if wanted_ref is not None and wanted_ref is self._wanted_reference:
+                ref = wanted_ref[1]
+                if t > t0 + 1e-9:
+                    # planned from t0, in force from t (the furnace went on meanwhile): the new reference
+                    # and its plan start at t, so a points reference's times count from the change in force
+                    ref = self._make_reference(wanted_ref[0], float(np.asarray(ref(t0))), t_start=t)
+                    ctl = dataclasses.replace(ctl, plan=ctl.plan.shifted(t - t0))
                 self._reference_spec = wanted_ref[0]
-                self._set_ref_fn(wanted_ref[1])
+                self._set_ref_fn(ref)
                 self._wanted_reference = None
             if spec is self._wanted_oscillation:
                 self._wanted_oscillation = None
             if spec != self._oscillation:
                 self._oscillation = spec
                 self.furnace.set_oscillation(spec, t)
-            late = f", plan in force from t = {t:.1f} s" if t_ref < t - 1e-9 else ""
-            said = {"reference": f"reference changed at t = {t_ref:.1f} s{late}",
+            said = {"reference": f"reference changed at t = {t:.1f} s",
                     "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s"}
             self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
-            return {"reference": t_ref, "oscillation": t}
+            return t
 
         def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
             self._wanted_reference, self._wanted_oscillation = None, None

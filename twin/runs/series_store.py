@@ -109,9 +109,9 @@ def load_parts(folder: Path) -> dict[str, Any]:
 
 def consolidate(folder: Path, path: Path) -> dict[str, Any]:
     """Write ``path`` (``timeseries.npz``) from the parts and remove them; returns the arrays.  Without
-    parts, returns what ``path`` holds (already consolidated)."""
+    parts, returns what ``path`` holds (already consolidated; nothing if the run stored no sample)."""
     if not has_parts(folder):
-        return load_arrays(path)
+        return load_arrays(path) if Path(path).is_file() else {}
     arrays = load_parts(folder)
     save_arrays(path, arrays, compress=False)
     shutil.rmtree(parts_dir(folder), ignore_errors=True)
