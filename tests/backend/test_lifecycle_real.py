@@ -19,7 +19,8 @@ from backend.app import create_app
 from backend.settings import Settings
 from conftest import stream_frames, wait_status
 
-SCENARIO = {"duration": 12.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
+# 30 s: a change is in force once re-planned, which takes seconds of wall time on a loaded machine
+SCENARIO = {"duration": 30.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
 REF_AT, NEW_REF = 3.0, {"setpoint": 950.0, "t_E": 2.0}
 OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
 
@@ -61,8 +62,8 @@ def test_frames_follow_the_contract(finished_run, small_cfg) -> None:
     ts = [f["t"] for f in frames]
     assert ts == sorted(ts) and ts[-1] == pytest.approx(SCENARIO["duration"])
     # speed 3 x 10 samples per simulated s = 30 samples/s, capped at 20 frames/s per client:
-    # 12 s / 3 = 4 s of wall time -> at most ~80 frames, and far more than a handful
-    assert 20 <= len(frames) <= 12 * 10 + 2
+    # 30 s / 3 = 10 s of wall time -> at most ~200 frames, and far more than a handful
+    assert 20 <= len(frames) <= 10 * 20 + 2
 
 
 def _first_frame_after(frames: list[dict], t: float) -> dict:

@@ -76,7 +76,8 @@ def test_finding_01_a_plan_is_cancelled_within_a_second(model) -> None:
 
 
 def _background_loop(small_radiation, **kw) -> ClosedLoop:
-    sc = Scenario.model_validate({"reference": {"setpoint": 900.0, "t_E": 20.0}, "duration": 60.0, **kw})
+    # long enough that the loop, stepped while the plans are solved, does not end first on a loaded machine
+    sc = Scenario.model_validate({"reference": {"setpoint": 900.0, "t_E": 20.0}, "duration": 3600.0, **kw})
     loop = ClosedLoop(small_config(), sc, small_radiation, background=True)
     for _ in range(5):
         loop.step()
@@ -153,7 +154,7 @@ def test_finding_10_failed_replan_changes_nothing(small_radiation, monkeypatch) 
     with pytest.raises(feedforward.FeedforwardError):
         fut.result()
     snaps = [loop.step() for _ in range(60)]
-    assert any("re-planning failed" in e for s in snaps for e in s.events)
+    assert any("re-planning failed" in str(e) for e in loop.timeseries()["event_text"])
     assert loop._reference_spec is before  # the old reference is still in force
     assert snaps[-1].T_ref == pytest.approx(float(old_ref(snaps[-1].t)))
     loop.close()

@@ -155,6 +155,11 @@ class PlanBudget:
         if self.elapsed_s > self.max_wall_s:
             raise PlanTooLarge(f"{what} did not finish within {self.max_wall_s:g} s (this server's plan time limit)")
 
+    def check_cancel(self, what: str = "planning") -> None:
+        """Raise :class:`PlanCancelled` if cancelled (the wall time is not looked at)."""
+        if self.cancel.is_set():
+            raise PlanCancelled(f"{what} was cancelled")
+
     def problem(self, est: PlanEstimate) -> str | None:
         """Why a plan of this size cannot be made within the budget, or ``None``."""
         what = (f"a plan over {est.horizon_s:.0f} s ({est.knots} knots, {est.samples} samples)")

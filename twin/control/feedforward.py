@@ -152,7 +152,7 @@ class PlanGrid:
     T_hot: float  # hottest temperature planned for (K)
 
     def estimate(self, model: DiscreteDynamics, cfg: FurnaceConfig | None = None, *,
-                 timed: bool = False) -> PlanEstimate:
+                 timed: bool = False, check: Callable[[], None] | None = None) -> PlanEstimate:
         """Size of the plan on this grid (:class:`twin.control.budget.PlanEstimate`); with ``timed=True``
         (needs ``cfg``) also its typical cost: one sweep of this OCP is run and timed (it allocates the
         arrays :attr:`PlanEstimate.memory_mb` counts: check that first), and a Jacobian pair and a Riccati step."""
@@ -166,7 +166,8 @@ class PlanGrid:
         grid = KnotGrid(self.t0, model.t_s, substeps, self.K)
         inputs = ScaledDistribution(model.m, self.K, cfg.feedforward.smoothing)
         shooting = CoarseShooting(model, th, grid.dt, self.n_heun, np.full(self.K + 1, self.T_final),
-                                  knot_weights(grid), cfg.feedforward.g0, cfg.feedforward.g1, inputs)
+                                  knot_weights(grid), cfg.feedforward.g0, cfg.feedforward.g1, inputs,
+                                  check=check)
         p = np.concatenate([np.full(model.m, 1.0 / model.m), np.full(self.K, 0.5)])
         sweep_s = _seconds(lambda: shooting.sweep(p), repeat=1)
         jac_s = _seconds(lambda: (model.jac_theta(th, u), model.jac_u(th, u)))
@@ -192,7 +193,7 @@ def check_budget(grid: PlanGrid, model: DiscreteDynamics, cfg: FurnaceConfig, bu
     """Raise :class:`twin.control.budget.PlanTooLarge` if the plan on ``grid`` needs more memory than
     ``budget`` allows, or (then timed: one sweep) more time; returns the timed estimate."""
     budget.refuse_if_too_large(grid.estimate(model))
-    est = grid.estimate(model, cfg, timed=True)
+    est = grid.estimate(model, cfg, timed=True, check=budget.check_cancel)  # the estimate's time is not the plan's
     budget.refuse_if_too_large(est)
     return est
 
