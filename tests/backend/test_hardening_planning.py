@@ -97,7 +97,7 @@ def test_finding_10_put_answers_when_planned(tmp_path, small_cfg, monkeypatch) -
         assert run["reference"] == {"setpoint": 700.0, "t_E": 5.0}
         c.post(f"/api/runs/{run_id}/stop")
         wait_status(c, run_id, {"stopped"})
-    with real_client(tmp_path / "b", small_cfg) as c:
+    with real_client(tmp_path / "b", small_cfg, change_timeout_s=600.0) as c:  # wait for it however loaded
         run_id = c.post("/api/runs", json=scenario).json()["id"]
         wait_status(c, run_id, {"running"}, timeout=180.0)
         t0 = time.monotonic()
