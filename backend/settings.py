@@ -68,7 +68,9 @@ class Settings(BaseSettings):
     @field_validator("api_token")
     @classmethod
     def _token_length(cls, v: str | None) -> str | None:
-        if v is not None and len(v) < MIN_TOKEN_LENGTH:
+        if not v:  # FURNACE_TWIN_API_TOKEN= (empty): no token
+            return None
+        if len(v) < MIN_TOKEN_LENGTH:
             raise ValueError(f"the API token must have at least {MIN_TOKEN_LENGTH} characters, got {len(v)}")
         return v or None
 

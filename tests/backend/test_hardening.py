@@ -205,6 +205,7 @@ def test_finding_12_short_tokens_are_refused() -> None:
     with pytest.raises(ValidationError, match=str(MIN_TOKEN_LENGTH)):
         Settings(api_token="s3cret")
     assert Settings(api_token="x" * MIN_TOKEN_LENGTH).api_token
+    assert Settings(api_token="").api_token is None  # an empty variable means no token
 
 
 def test_finding_12_short_token_refused_by_serve(monkeypatch, small_cfg) -> None:
