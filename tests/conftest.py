@@ -6,6 +6,21 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# Property tests (hypothesis): deterministic (derandomize: CI sees the same examples every run, no
+# example database), a bounded number of examples, and a per-example deadline generous enough for a
+# loaded 2-core machine (the examples take milliseconds; 2 s only catches a runaway).
+settings.register_profile(
+    "furnace",
+    max_examples=40,
+    deadline=2000,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+    print_blob=False,
+)
+settings.load_profile("furnace")
 
 REPO = Path(__file__).resolve().parents[1]
 TEST_RADIATION_CACHE = REPO / ".cache" / "test-radiation"  # also set for the whole session in ../conftest.py

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from controller_standin import make_standin
+from hypothesis import given
+from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from twin.config import small_config
@@ -121,3 +123,60 @@ def test_steady_state_of_nonlinear_standin_is_fixed_point():
     theta = steady_state(model, u, np.full(model.n, 700.0))
     # Newton tolerance 1e-6 K; one more step of the model moves it by t_s |f| << 1e-6 K
     assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+@st.composite
+def _monotone_points(draw):
+    """Strictly increasing times (s, relative) and monotone temperatures (K), rising or falling."""
+    n = draw(st.integers(1, 6))
+    gaps = draw(st.lists(st.floats(1.0, 60.0), min_size=n, max_size=n))
+    t0 = draw(st.sampled_from([0.0, 5.0]))
+    times = (t0 + np.cumsum(gaps) - gaps[0]).tolist()
+    steps = draw(st.lists(st.floats(0.0, 300.0), min_size=n, max_size=n))
+    sign = draw(st.sampled_from([1.0, -1.0]))
+    T_initial = draw(st.floats(260.0, 1290.0))
+    # within the scenario's admissible 250..1300 K (clipping keeps the data monotone)
+    temps = np.clip(T_initial + sign * np.cumsum(steps), 260.0, 1290.0).tolist()
+    return list(zip(times, temps, strict=True)), T_initial, draw(st.floats(0.0, 100.0))
+
+
+@given(_monotone_points())
+def test_points_reference_is_monotone_between_monotone_points_and_c1(case) -> None:
+    points, T_initial, t_start = case
+    ref = reference_trajectory(PointsReference(points=points), T_initial, t_start=t_start)
+    knots = [t_start + t for t, _ in points]
+    temps = np.array([T for _, T in points])
+    np.testing.assert_allclose(ref(np.array(knots)), temps, rtol=1e-13)  # through every point
+    t = np.linspace(t_start - 10.0, knots[-1] + 10.0, 4001)
+    T = ref(t)
+    d = np.diff(T)
+    rising = temps[-1] >= T_initial
+    tol = 1e-9 * np.abs(T).max()
+    assert (d >= -tol).all() if rising else (d <= tol).all()  # monotone data: no overshoot (Fritsch-Carlson)
+    lo, hi = min(T_initial, temps.min()), max(T_initial, temps.max())
+    assert T.min() >= lo - tol and T.max() <= hi + tol
+    # C1: no jump of value or slope at any knot, including the joins with the constants at both ends
+    gap = min([b - a for a, b in zip(knots, knots[1:], strict=False)] + [1.0])
+    jv, js = _c1_jumps(ref, sorted({t_start, *knots}), h=1e-6 * gap)
+    slope_scale = (hi - lo) / gap + 1.0
+    assert jv < 1e-9 * hi and js < 1e-3 * slope_scale
+    # the rate is the derivative of the curve (central differences, O(h^2))
+    tm = np.linspace(t_start, knots[-1], 50)[1:-1]
+    h = 1e-4 * gap
+    np.testing.assert_allclose(ref.rate(tm), (ref(tm + h) - ref(tm - h)) / (2 * h), atol=1e-4 * slope_scale)
+
+
+@given(st.floats(260.0, 1290.0), st.floats(301.0, 1300.0), st.floats(2.0, 600.0), st.floats(0.0, 500.0))
+def test_transition_is_monotone_c1_and_the_cubic_step(T0, T_E, t_E, t_start) -> None:
+    ref = reference_trajectory(TransitionReference(setpoint=T_E, t_E=t_E), T0, t_start=t_start)
+    s = np.linspace(0.0, 1.0, 101)
+    # the cubic Hermite step T0 + (T_E - T0)(3 s^2 - 2 s^3) (module docstring), by its formula
+    np.testing.assert_allclose(ref(t_start + s * t_E), T0 + (T_E - T0) * (3 * s**2 - 2 * s**3),
+                               rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(ref.rate(t_start + s[1:-1] * t_E),
+                               (T_E - T0) * 6 * s[1:-1] * (1 - s[1:-1]) / t_E, rtol=1e-9, atol=1e-12)
+    d = np.diff(ref(np.linspace(t_start - 1.0, t_start + t_E + 1.0, 1001)))
+    assert (np.sign(T_E - T0) * d >= -1e-9 * max(T0, T_E)).all()
+    jv, js = _c1_jumps(ref, [t_start, t_start + t_E], h=1e-6 * t_E)
+    assert jv < 1e-9 * max(T0, T_E) and js < 1e-3 * (abs(T_E - T0) / t_E + 1.0)

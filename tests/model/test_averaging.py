@@ -61,3 +61,52 @@ def test_averaged_matrices_equal_the_time_average_of_interpolated_tables() -> No
     # same quadrature bound as above times max |P| ~ 3 and 5 terms
     np.testing.assert_allclose(P1, np.tensordot(ref, tables.P1, axes=1), atol=2e-5)
     np.testing.assert_allclose(P2, np.tensordot(ref, tables.P2, axes=1), atol=2e-5)
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@st.composite
+def _tables_and_amplitudes(draw):
+    """Increasing table positions (not necessarily symmetric or equally spaced) and an admissible amplitude."""
+    n = draw(st.integers(2, 15))
+    gaps = np.array(draw(st.lists(st.floats(0.1, 1.0), min_size=n - 1, max_size=n - 1)))
+    left = draw(st.floats(0.05, 0.95))  # fraction of the span on the negative side
+    nodes = np.concatenate([[0.0], np.cumsum(gaps)])
+    nodes = 0.06 * (nodes / nodes[-1] - left)  # span 0.06 m, eta = 0 inside
+    a_max = min(-nodes[0], nodes[-1])
+    amplitude = draw(st.floats(0.0, 1.0)) * a_max
+    return nodes, amplitude
+
+
+@given(_tables_and_amplitudes())
+def test_weights_are_a_probability_with_the_motions_moments(case) -> None:
+    """For any amplitude: w_n >= 0, sum w_n = 1, and the moments of the arcsine law.
+
+    Linear interpolation reproduces linear functions, so sum w_n eta_n is the time mean of
+    a sin(.), 0; it over-estimates the convex eta^2 by at most (max gap)^2 / 4 above the true
+    mean square a^2 / 2.
+    """
+    nodes, a = case
+    w = oscillation_weights(nodes, a)
+    assert (w >= 0).all()
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    assert abs(w @ nodes) <= 1e-12 * np.ptp(nodes) + 1e-15
+    second = w @ nodes**2
+    assert a**2 / 2 - 1e-15 <= second <= a**2 / 2 + np.max(np.diff(nodes)) ** 2 / 4 + 1e-15
+    # only the nodes of the intervals the motion visits carry weight
+    reach = (nodes >= -a - 1e-15) | np.r_[nodes[1:] >= -a, True]
+    reach &= (nodes <= a + 1e-15) | np.r_[True, nodes[:-1] <= a]
+    assert (w[~reach] == 0).all()
+
+
+@given(_tables_and_amplitudes(), st.floats(0.0, 1.0))
+def test_hat_weights_interpolate_linear_functions_exactly(case, s) -> None:
+    nodes = case[0]
+    eta = nodes[0] + s * np.ptp(nodes)
+    w = hat_weights(nodes, eta)
+    assert (w >= 0).all() and w.sum() == pytest.approx(1.0, abs=1e-15)
+    assert np.count_nonzero(w) <= 2
+    assert w @ nodes == pytest.approx(eta, abs=1e-15)

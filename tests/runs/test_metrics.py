@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from twin.physics.fillet import Fillet
 from twin.runs.metrics import compute_metrics, window
@@ -73,3 +75,43 @@ def test_stopped_run_gives_nan_for_missing_windows():
         ts[k] = ts[k][keep]
     m = compute_metrics(ts)
     assert np.isnan(m["mean_error_steady_max"]) and m["mean_error_transient_max"] == 0.0
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+TEMPERATURE_KEYS = ("T_ref", "T_mean_hat", "tc", "tc_hat", "field_hat", "field_true")
+
+
+def _perturbed(seed: int) -> dict:
+    """A series with errors everywhere: mean, TCs, estimated and true fields (deterministic in seed)."""
+    rng = np.random.default_rng(seed)
+    ts = _series(n_t=81, t_E=4.0)
+    n = ts["t"].size
+    ts["T_mean_hat"] = ts["T_mean_hat"] + rng.normal(0, 8, n)
+    ts["tc"] = ts["tc"] + rng.normal(0, 5, (n, 4))
+    ts["field_hat"] = ts["field_hat"] + rng.normal(0, 20, ts["field_hat"].shape)
+    ts["field_true"] = ts["field_true"] + rng.normal(0, 20, ts["field_true"].shape)
+    return ts
+
+
+@given(st.integers(0, 2**16), st.floats(-250.0, 600.0))
+def test_metrics_do_not_change_when_every_temperature_and_the_reference_shift_together(seed, shift) -> None:
+    """Every metric is a difference of two temperatures over the setpoint: a common offset cancels."""
+    ts = _perturbed(seed)
+    base = compute_metrics(ts)
+    shifted = dict(ts, **{k: ts[k] + shift for k in TEMPERATURE_KEYS})
+    again = compute_metrics(shifted)
+    assert all(np.isfinite(v) and v > 0 for v in base.values()), base  # every metric sees an error
+    for k, v in base.items():
+        # offsets of up to 1.7e3 K on errors of ~1e1 K: rounding ~1e-13 K over the 1100 K setpoint
+        assert again[k] == pytest.approx(v, rel=1e-9, abs=1e-12), k
+
+
+@given(st.integers(0, 2**16), st.floats(0.2, 5.0))
+def test_metrics_are_relative_to_the_setpoint(seed, factor) -> None:
+    """Scaling every temperature, the reference and the setpoint together leaves the relative errors."""
+    ts = _perturbed(seed)
+    base = compute_metrics(ts)
+    scaled = dict(ts, setpoint=ts["setpoint"] * factor, **{k: ts[k] * factor for k in TEMPERATURE_KEYS})
+    again = compute_metrics(scaled)
+    for k, v in base.items():
+        assert again[k] == pytest.approx(v, rel=1e-9), k
