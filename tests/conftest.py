@@ -43,10 +43,18 @@ def radiation_cache() -> Path:
     return TEST_RADIATION_CACHE
 
 
+#: the loaded test radiation model, kept for the life of the process: a mutation run
+#: (scripts/mutation.sh) forks one pytest session per mutant from a process that already loaded it
+_RADIATION: dict[str, object] = {}
+
+
 @pytest.fixture(scope="session")
 def small_radiation(radiation_cache):
     """``radiation_model(small_config())`` from the test cache (ray-traced on first use)."""
     from twin.config import small_config
     from twin.radiation import radiation_model
 
-    return radiation_model(small_config(), cache_dir=radiation_cache)
+    key = str(radiation_cache)
+    if key not in _RADIATION:
+        _RADIATION[key] = radiation_model(small_config(), cache_dir=radiation_cache)
+    return _RADIATION[key]

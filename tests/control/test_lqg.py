@@ -11,8 +11,11 @@ from twin.config import small_config
 from twin.control.lqg import (
     Controller,
     IntegratorState,
+    anti_windup_delta,
     augmented_system,
     dare,
+    feedback_control,
+    integrator_delta,
     lqg_gains,
     riccati_step,
     weight_matrix,
@@ -259,3 +262,100 @@ def test_integral_action_removes_steady_mean_error_under_mismatch(standin, cfg):
         u, _, _ = ctrl2.control(j, theta)
         theta = plant.step(theta, u)
     assert abs(float(standin.c_m @ theta) - T_ref) > 1.0
+
+
+# ------------------------------------------------------------------ anti-windup at its edges
+# Remark 5: delta = 0 iff 1^T u > delta0 (strictly); the clamp rule: delta = 0 iff no group can follow
+# the integrator's push (sign of k_int * e): at u = 1 while pushed up, at u = 0 while pushed down.
+ONE_ULP_ABOVE_2 = np.nextafter(2.0, 3.0)
+
+
+@pytest.mark.parametrize(
+    ("u", "delta"),
+    [([0.5, 0.5, 1.0], 1.0), ([0.5, 0.5, ONE_ULP_ABOVE_2 - 1.0], 0.0), ([0.5, 0.5, 0.9], 1.0), ([1.0, 1.0, 1.0], 0.0)],
+    ids=["sum-at-delta0", "sum-above", "sum-below", "all-full"],
+)
+def test_remark5_total_power_threshold(u, delta) -> None:
+    u = np.array(u)
+    assert anti_windup_delta(u, 2.0) == delta
+    # the controller's rule applies the same threshold to the applied (clipped) input; a 1 K error
+    # pushed upwards by a group below 1 would otherwise keep the integrator running
+    assert integrator_delta(u, u - 0.01, np.array([1.0, 1.0, 1.0]), -1.0, 2.0) == delta
+
+
+@pytest.mark.parametrize(
+    ("u_raw", "k_int", "error", "delta"),
+    [
+        ([1.0, 1.0], [-1.0, -1.0], -1.0, 0.0),  # too cold, pushed up, both at exactly 1: frozen
+        ([1.0, np.nextafter(1.0, 0.0)], [-1.0, -1.0], -1.0, 1.0),  # one ulp below 1: that group follows
+        ([1.3, 0.99], [-1.0, -1.0], -1.0, 1.0),  # one group clipped, the other can follow
+        ([1.3, 1.1], [-1.0, 0.0], -1.0, 0.0),  # the free group is not pushed (k_int = 0)
+        ([1.3, 1.1], [-1.0, -1.0], 1.0, 1.0),  # too hot: pushed down, groups at 1 can follow
+        ([0.0, 0.0], [-1.0, -1.0], 1.0, 0.0),  # too hot, both at exactly 0: frozen
+        ([0.0, np.nextafter(0.0, 1.0)], [-1.0, -1.0], 1.0, 1.0),  # one ulp above 0 follows
+        ([-0.2, -0.1], [-1.0, -1.0], -1.0, 1.0),  # below 0 but pushed up: can follow
+        ([-0.2, -0.1], [1.0, 1.0], -1.0, 0.0),  # k_int > 0: a cold error pushes down, both at 0: frozen
+        ([1.3, 1.1], [-1.0, -1.0], 0.0, 1.0),  # no error: nothing to integrate, never frozen
+    ],
+)
+def test_clamp_rule_at_the_input_bounds(u_raw, k_int, error, delta) -> None:
+    u_raw = np.array(u_raw)
+    u = np.clip(u_raw, 0.0, 1.0)
+    assert integrator_delta(u, u_raw, np.array(k_int), error, 10.0) == delta  # delta0 out of reach
+
+
+def _one_step(standin, cfg, u_level, offset, delta0, e_I=0.0):
+    plan = _constant_plan(standin, np.full(standin.m, u_level), 5)
+    gains = lqg_gains(standin, plan, cfg)
+    out, new = feedback_control(gains, plan, standin.c_m, delta0, 0, plan.theta_ref[0] + offset,
+                                IntegratorState(e_I))
+    return plan, gains, out, new
+
+
+def test_feedback_control_integrates_exactly_at_the_threshold_and_freezes_above(standin, cfg) -> None:
+    # a 0.5 K error: no group is clipped, so only Remark 5 decides; the applied sum is the threshold
+    plan, gains, out, new = _one_step(standin, cfg, 0.6, -0.5, 10.0, e_I=3.0)
+    total = float(out.u.sum())
+    _, _, at, at_new = _one_step(standin, cfg, 0.6, -0.5, total, e_I=3.0)
+    assert at.delta == 1.0 and at_new.e_I == pytest.approx(3.0 + plan.t_s * at.mean_error, rel=1e-12)
+    assert at.mean_error == pytest.approx(-0.5, rel=1e-9) and not at_new.frozen
+    _, _, above, above_new = _one_step(standin, cfg, 0.6, -0.5, np.nextafter(total, 0.0), e_I=3.0)
+    assert above.delta == 0.0 and above_new.e_I == 3.0 and above_new.frozen
+    # the integrator state enters the feedback: Delta u = K_j [theta_hat - theta_ref; e_I] (eq. 25)
+    np.testing.assert_allclose(above.du, gains.K[0] @ np.append(np.full(standin.n, -0.5), 3.0), rtol=1e-12)
+
+
+def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg) -> None:
+    """The recursion (26), (29) with delta(u_ff,j) of Remark 5 in Phi~_j (24), written out here.
+
+    u_ff alternates between a total above and below delta0; Phi_j, Gamma_j are held over 3 samples
+    (jacobian_every = 3), so the design must switch delta inside a hold.
+    """
+    N, every = 12, 3
+    c = small_config().with_overrides({"lqg.delta0": 1.5})
+    u_lo, u_hi = np.full(standin.m, 0.4), np.full(standin.m, 0.6)  # totals 1.2 and 1.8 around 1.5
+    u_ff = np.array([u_hi if j % 2 else u_lo for j in range(N)])
+    theta = [steady_state(standin, u_lo, np.full(standin.n, 900.0))]
+    for j in range(N):
+        theta.append(standin.step(theta[-1], u_ff[j]))
+    theta = np.array(theta)
+    T = theta @ standin.c_m
+    plan = FeedforwardPlan(np.arange(N + 1) * standin.t_s, u_ff, theta, T, T, "alternating", 0, 0.0, True)
+    gains = lqg_gains(standin, plan, c, jacobian_every=every)
+
+    w = c.lqg
+    Q = weight_matrix(standin.c_m, w.q0, w.q1)
+    Pt_N, Gt_N = augmented_system(standin.jac_theta(theta[N], u_ff[-1]), standin.jac_u(theta[N], u_ff[-1]),
+                                  standin.c_m, standin.t_s, 1.0)  # terminal design: delta = 1
+    P = dare(Pt_N, Gt_N, Q, w.r0)
+    np.testing.assert_allclose(gains.P_terminal, P, rtol=1e-12)
+    expected = np.empty_like(gains.K)
+    for j in range(N - 1, -1, -1):
+        jj = (j // every) * every
+        delta = 0.0 if u_ff[j].sum() > 1.5 else 1.0
+        Pt, Gt = augmented_system(standin.jac_theta(theta[jj], u_ff[jj]), standin.jac_u(theta[jj], u_ff[jj]),
+                                  standin.c_m, standin.t_s, delta)
+        P, expected[j] = riccati_step(P, Pt, Gt, Q, w.r0)
+    np.testing.assert_allclose(gains.K, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
+    # delta matters: with the integrator row switched off the integral gain changes
+    assert np.abs(gains.K[1][:, -1] - gains.K[0][:, -1]).max() > 1e-6 * np.abs(gains.K[0][:, -1]).max()

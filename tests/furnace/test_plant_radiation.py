@@ -215,8 +215,28 @@ def test_single_precision_radiation_changes_trajectories_negligibly(cfg, small_r
     np.testing.assert_allclose(a, b, atol=1e-3)
 
 
-def test_plant_rtf_runs(cfg, small_radiation):
-    from twin.runs.bench import plant_rtf
+def test_plant_rtf_times_the_papers_oscillating_run(cfg, small_radiation, monkeypatch):
+    """plant_rtf runs what its docstring says and divides simulated by wall time (a fake clock)."""
+    from types import SimpleNamespace
 
-    # timing is the bench's business; here only that it runs and returns a rate
-    assert plant_rtf(cfg, small_radiation, duration=1.0) > 0.0
+    import twin.runs.bench as bench
+
+    calls = []
+    advance = Plant.advance
+
+    def spy(self, state, u, dt, eta_of_t, *args, **kwargs):
+        calls.append((np.array(u, copy=True), dt, eta_of_t))
+        return advance(self, state, u, dt, eta_of_t, *args, **kwargs)
+
+    ticks = iter([100.0, 104.0])  # the timed loop starts at 100 s and ends at 104 s of the fake clock
+    monkeypatch.setattr(Plant, "advance", spy)
+    monkeypatch.setattr(bench, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
+    rate = bench.plant_rtf(cfg, small_radiation, duration=2.0)
+    assert rate == pytest.approx(2.0 / 4.0)  # 2 simulated s in 4 wall s
+    t_s = cfg.sampling.t_s
+    assert len(calls) == 5 + round(2.0 / t_s)  # 5 warm-up steps, then one advance per sample
+    u, dt, eta = calls[-1]
+    np.testing.assert_array_equal(u, np.full(cfg.n_groups, 0.6))
+    assert dt == t_s
+    # eta = 3 L_h sin(2 pi t / 18 s), capped at eta_max: the amplitude at a quarter period
+    assert eta(4.5) == pytest.approx(min(3 * cfg.lamps.horizontal.pitch, cfg.oscillation.eta_max), rel=1e-12)
