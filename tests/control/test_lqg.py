@@ -237,6 +237,35 @@ def test_with_plan_keeps_integrator(standin, cfg):
     ctrl.control(0, plan.theta_ref[0] - 1.0)
     new = ctrl.with_plan(plan, gains)
     assert new.state.e_I == ctrl.state.e_I and new.state is not ctrl.state
+    assert new.model is standin and new.cfg is cfg  # the model is kept unless a new one is given
+
+
+def test_with_plan_switches_plan_gains_and_model_and_keeps_a_frozen_integrator(standin, cfg):
+    ctrl, plan, _ = _controller(standin, cfg, 0.98)
+    for j in range(3):
+        ctrl.control(j, plan.theta_ref[0] - 50.0)  # saturated: the integrator freezes (see above)
+    assert ctrl.state.frozen
+    other = make_standin(gain_scale=0.8)
+    new_plan = _constant_plan(other, np.full(other.m, 0.5), 30)
+    new_gains = lqg_gains(other, new_plan, cfg)
+    new = ctrl.with_plan(new_plan, new_gains, other)
+    assert new.model is other and new.plan is new_plan and new.gains is new_gains and new.cfg is cfg
+    assert new.state.frozen and new.state.e_I == ctrl.state.e_I
+    theta_hat = new_plan.theta_ref[2] + 0.3
+    u, u_ff, du = new.control(2, theta_hat)
+    out, _ = feedback_control(new_gains, new_plan, other.c_m, cfg.lqg.delta0, 2, theta_hat,
+                              IntegratorState(ctrl.state.e_I, True))
+    np.testing.assert_array_equal(u, out.u)
+    np.testing.assert_array_equal(du, out.du)
+
+
+def test_control_at_a_run_time_uses_the_sample_of_the_plan(standin, cfg):
+    ctrl, plan, gains = _controller(standin, cfg, 0.5)
+    theta_hat = plan.theta_ref[7] + 0.5
+    u, _, du = ctrl.control_at(0.69, theta_hat)  # 0.69 s / 0.1 s rounds to sample 7
+    e = np.append(theta_hat - plan.theta_ref[7], 0.0)
+    np.testing.assert_allclose(du, gains.K[7] @ e, rtol=1e-12)
+    assert ctrl.last is not None and ctrl.last.u is not None and np.array_equal(ctrl.last.u, u)
 
 
 def test_integral_action_removes_steady_mean_error_under_mismatch(standin, cfg):

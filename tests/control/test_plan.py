@@ -108,3 +108,31 @@ def test_fastest_rate_is_the_spectral_radius_of_the_continuous_jacobian() -> Non
     assert _fastest_rate(model, np.zeros(2), np.zeros(1)) == pytest.approx(np.sqrt(5.0), rel=1e-12)
     assert _fastest_rate(_Linear(np.diag([-0.1, -2.5, -0.7]), np.zeros((3, 1))), np.zeros(3), np.zeros(1)) \
         == pytest.approx(2.5, rel=1e-12)
+
+
+def test_transition_end_prefers_the_references_own_end() -> None:
+    from twin.control.feedforward import transition_end
+    from twin.control.reference import reference_trajectory
+    from twin.scenario import TransitionReference
+
+    ref = reference_trajectory(TransitionReference(setpoint=900.0, t_E=30.05), 300.0)
+    assert transition_end(ref, 0.0, 0.1) == 30.05  # not the 30.1 s a scan on the 0.1 s grid would find
+
+
+def test_transition_end_of_a_callable_is_the_first_sample_after_it_stops_moving() -> None:
+    from twin.control.feedforward import MAX_REFERENCE_S, transition_end
+
+    # a ramp from t0 = 2 s that stops at 2.55 s: moving at 2.0 .. 2.5 s, constant from 2.6 s on (0.1 s grid)
+    assert transition_end(lambda t: np.minimum(np.asarray(t) - 2.0, 0.55), 2.0, 0.1) == pytest.approx(2.6)
+    # a reference that moves until the end of the longest scan (MAX_REFERENCE_S after t0)
+    def slow(t):
+        return 1000.0 + np.minimum(np.asarray(t, float), MAX_REFERENCE_S)
+
+    assert transition_end(slow, 0.0, 0.1) == pytest.approx(MAX_REFERENCE_S)
+    # a change far below 1e-9 relative of the final value is not motion (round-off of a held value)
+    assert transition_end(lambda t: 1000.0 + 1e-10 * (np.asarray(t) < 5.0), 0.0, 0.1) == 0.0
+    # ... but a change of 1e-6 K at 1000 K is (1e-9 x 1000 K = 1e-6 K is the threshold: strictly above)
+    assert transition_end(lambda t: 1000.0 + 2e-6 * (np.asarray(t) < 5.0), 0.0, 0.1) == pytest.approx(5.0)
+    assert transition_end(lambda t: 1000.0 + 0.5e-6 * (np.asarray(t) < 5.0), 0.0, 0.1) == 0.0
+    # the threshold is relative to the final value, at least 1e-9 K
+    assert transition_end(lambda t: 2e-9 * (np.asarray(t) < 5.0), 0.0, 0.1) == pytest.approx(5.0)

@@ -125,6 +125,54 @@ def test_steady_state_of_nonlinear_standin_is_fixed_point():
     assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6
 
 
+SURROUNDINGS = ("housing.temperature", "reflector.temperature", "holders.temperature_upper",
+                "holders.temperature_lower", "inert_gas.temperature_top", "inert_gas.temperature_bottom")
+
+
+@pytest.mark.parametrize("field", SURROUNDINGS)
+def test_each_surrounding_can_be_the_coldest(field):
+    cfg = small_config().with_overrides({field: 251.0})  # colder than every other surface of the furnace
+    assert coldest_surrounding(cfg) == 251.0
+
+
+def test_reachable_range_is_closed_and_named_in_the_error():
+    lo, hi = 320.0, 1150.0
+    # the ends themselves are reachable
+    assert reference_trajectory(TransitionReference(setpoint=hi), 400.0, T_range=(lo, hi)).T_final == hi
+    assert reference_trajectory(PointsReference(points=[(10.0, lo)]), 400.0, T_range=(lo, hi)).T_final == lo
+    with pytest.raises(ReferenceError, match="setpoint 1150.1 K is unreachable"):
+        reference_trajectory(TransitionReference(setpoint=1150.1), 400.0, T_range=(lo, hi))
+    with pytest.raises(ReferenceError, match="reference point temperature 319.9 K is unreachable"):
+        reference_trajectory(PointsReference(points=[(10.0, 319.9)]), 400.0, T_range=(lo, hi))
+
+
+def test_initial_temperature_and_start_time_are_checked():
+    for bad in (0.0, -5.0, float("inf")):
+        with pytest.raises(ReferenceError, match="initial mean temperature"):
+            reference_trajectory(TransitionReference(), bad)
+    assert reference_trajectory(TransitionReference(), 0.5).T_initial == 0.5  # any positive kelvin
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ReferenceError, match="t_start"):
+            reference_trajectory(TransitionReference(), 300.0, t_start=bad)
+
+
+def test_points_starting_after_the_start_rise_from_the_initial_mean_at_once():
+    # first point at 0.5 s: the curve starts at T_initial at t_start and is already moving at 0.25 s
+    ref = reference_trajectory(PointsReference(points=[(0.5, 700.0)]), 300.0, t_start=4.0)
+    assert ref.t_start == 4.0 and ref(np.array([4.0]))[0] == 300.0
+    assert 300.0 < ref(np.array([4.25]))[0] < 700.0
+    assert ref(np.array([4.5]))[0] == 700.0
+    # a single point at 0 s is a step to a constant: no transition at all
+    flat = reference_trajectory(PointsReference(points=[(0.0, 800.0)]), 300.0, t_start=7.0)
+    assert (flat.t_start, flat.t_end, flat.T_initial, flat.T_final) == (7.0, 7.0, 800.0, 800.0)
+
+
+def test_rate_is_zero_outside_the_transition_as_floats():
+    ref = reference_trajectory(TransitionReference(setpoint=900.0, t_E=50.0), 350.0, t_start=10.0)
+    r = ref.rate(np.array([0.0, 10.0, 60.0, 100.0]))
+    assert r.dtype == np.float64 and r.tolist() == [0.0, 0.0, 0.0, 0.0]
+
+
 # ------------------------------------------------------------------ properties (hypothesis)
 @st.composite
 def _monotone_points(draw):

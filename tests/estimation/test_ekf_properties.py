@@ -114,6 +114,7 @@ def _update(y, gate=GATE, P=None):
 )
 def test_a_reading_at_the_gate_is_used_and_beyond_it_left_out(y1, used) -> None:
     _, info = _update([y1, 0.5, -0.5])  # two good readings keep the recovery rule off
+    np.testing.assert_array_equal(info.innovation, [y1, 0.5, -0.5])  # y - C theta with theta = 0
     assert info.normalized[0] == pytest.approx(abs(y1) / 2.0, rel=1e-15)
     assert info.used.tolist() == [used, True, True]
     assert info.reasons[0] == ("" if used else "gated")
@@ -162,3 +163,69 @@ def test_recovery_needs_at_least_two_working_readings(y, recovers) -> None:
         assert not info.used.any() and info.reasons == ("gated", "missing", "missing")
         np.testing.assert_array_equal(after.theta, before.theta)
         np.testing.assert_array_equal(after.P, before.P)
+
+
+# ------------------------------------------------------------------ prediction and the Estimator
+class _Bilinear:
+    """theta+ = theta + 0.1 (-theta^3 / 1e6 + u0 theta): a Jacobian that depends on theta and on u."""
+
+    def step(self, theta, u):
+        return theta + 0.1 * (-(theta**3) / 1e6 + u[0] * theta)
+
+    def jac_theta(self, theta, u):
+        return np.diag(1.0 + 0.1 * (-3.0 * theta**2 / 1e6 + u[0]))
+
+
+def test_prediction_linearises_at_the_estimate_and_the_input() -> None:
+    """Eqs. (14)-(16) by hand on a two-state model: Phi = diag(1 + 0.1 (-3 theta^2 / 1e6 + u))."""
+    from twin.estimation.ekf import ekf_predict
+
+    theta, u = np.array([100.0, 200.0]), np.array([-0.5])
+    P, Q = np.array([[4.0, 1.0], [1.0, 9.0]]), 0.25 * np.eye(2)
+    out = ekf_predict(_Bilinear(), EKFState(theta, P), u, Q)
+    phi = np.array([1 + 0.1 * (-0.03 - 0.5), 1 + 0.1 * (-0.12 - 0.5)])  # 0.947, 0.938
+    np.testing.assert_allclose(out.theta, theta + 0.1 * (-(theta**3) / 1e6 - 0.5 * theta), rtol=1e-15)
+    np.testing.assert_allclose(out.P, np.outer(phi, phi) * P + Q, rtol=1e-14)
+
+
+def test_gain_falls_back_to_the_general_solver_when_cholesky_fails() -> None:
+    from twin.estimation.ekf import _gain
+
+    S = np.array([[1.0, 2.0], [2.0, 1.0]])  # symmetric, indefinite: LAPACK's Cholesky refuses it
+    PCt = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    # K = P C^T S^-1 with S^-1 = [[-1, 2], [2, -1]] / 3 (by hand)
+    np.testing.assert_allclose(_gain(S, PCt), PCt @ np.array([[-1.0, 2.0], [2.0, -1.0]]) / 3.0, rtol=1e-14)
+    S_pd = np.array([[2.0, 1.0], [1.0, 2.0]])  # the normal path: S^-1 = [[2, -1], [-1, 2]] / 3
+    np.testing.assert_allclose(_gain(S_pd, PCt), PCt @ np.array([[2.0, -1.0], [-1.0, 2.0]]) / 3.0, rtol=1e-14)
+
+
+@pytest.fixture(scope="module")
+def furnace_model(small_radiation):
+    from twin.config import small_config
+    from twin.model.discrete import discrete_model
+
+    return small_config(), discrete_model(small_config(), small_radiation, None)
+
+
+def test_estimator_steps_in_the_papers_order(furnace_model) -> None:
+    """step(y, u_prev): update only at the first sample, then predict with the last input and update (13, 14)."""
+    from twin.estimation.ekf import Estimator, ekf_predict
+
+    cfg, model = furnace_model
+    theta0 = np.linspace(880.0, 920.0, model.n)  # a non-uniform initial estimate is kept as given
+    est = Estimator(model, cfg, theta0)
+    np.testing.assert_array_equal(est.state.theta, theta0)
+    np.testing.assert_array_equal(est.state.P, cfg.ekf.p0 * np.eye(model.n))
+    C, R, gate = est.C, est.R, cfg.ekf.innovation_gate
+    y1, y2, u = np.array([905.0, 898.0, 910.0]), np.array([912.0, 903.0, 915.0]), np.full(model.m, 0.4)
+    first = est.step(y1, u)
+    expected, _ = ekf_update(EKFState(theta0, cfg.ekf.p0 * np.eye(model.n)), y1, C, R, gate)
+    np.testing.assert_allclose(first.theta, expected.theta, rtol=1e-12)
+    second = est.step(y2, u)
+    # Phi in float32 by default (ekf.covariance_precision): P within float32 rounding of the exact filter
+    expected, _ = ekf_update(ekf_predict(model, expected, u, est.Q), y2, C, R, gate)
+    np.testing.assert_allclose(second.theta, expected.theta, rtol=1e-6)
+    np.testing.assert_allclose(second.P, expected.P, rtol=1e-4, atol=1e-4 * np.abs(expected.P).max())
+    # the estimate at any point is the FE interpolation of the nodes (eq. 7)
+    pts = np.array([[0.1, 0.05], [0.2, 0.1]])
+    np.testing.assert_allclose(est.estimate_at(pts), model.fe.phi(pts) @ est.state.theta, rtol=1e-15)

@@ -229,6 +229,10 @@ def test_ab2_history_is_used_only_for_a_continuing_trajectory():
     restarted = shared.advance(Sa.restarted(), u, 0.1, eta).T
     continued = shared.advance(Sa, u, 0.1, eta).T
     assert 0.0 < np.max(np.abs(restarted - continued)) < 2e-2
+    # a restart forgets everything the integrator carried: the history and the cached spectral bound
+    r = Sa.restarted()
+    assert Sa.history is not None and np.isfinite(Sa.rho)
+    assert (r.history, r.rho, r.rho_age, r.t) == (None, np.inf, 0, Sa.t) and r.T is Sa.T
 
 
 def test_methods_agree():
