@@ -105,19 +105,34 @@ def changed_lines(diff: str) -> tuple[list[str], list[str]]:
     return removed, added
 
 
+def _one_substitution(removed: str, added: str, subs: list[list[str]]) -> bool:
+    """Whether ``added`` is ``removed`` with one occurrence of one (pattern, replacement) applied."""
+    for pattern, replacement in subs:
+        for m in re.finditer(pattern, removed):
+            if removed[: m.start()] + m.expand(replacement) + removed[m.end():] == added:
+                return True
+    return False
+
+
 def equivalence(name: str, diff: str, by_name: dict[str, dict[str, str]], rules: list[dict[str, str]]
                 ) -> dict[str, str] | None:
-    """Why the mutant is equivalent (an entry of mutation_equivalent.toml), or None."""
+    """Why the mutant is equivalent (an entry of mutation_equivalent.toml), or None.
+
+    A rule matches a mutant whose changed lines pair up (removed, added) so that every pair is one
+    of the rule's substitutions (``subs``: regex, replacement) applied once to the removed line,
+    optionally only in some modules and only where the removed line matches ``where``.
+    """
     if name in by_name:
         return by_name[name]
     module = name.rpartition("__mutmut_")[0].rpartition(".")[0]
     removed, added = changed_lines(diff)
+    if not removed or len(removed) != len(added):
+        return None
     for rule in rules:
         if rule.get("modules") and module not in rule["modules"]:
             continue
-        if len(removed) == len(added) >= 1 and all(
-            re.search(rule["removed"], r) and re.search(rule["added"], a) for r, a in zip(removed, added, strict=True)
-        ):
+        if all(re.search(rule.get("where", ""), r) and _one_substitution(r, a, rule["subs"])  # type: ignore[arg-type]
+               for r, a in zip(removed, added, strict=True)):
             return rule
     return None
 
