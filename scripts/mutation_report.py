@@ -46,6 +46,14 @@ SCOPE: dict[str, list[str] | None] = {
     "twin.furnace.simulated.integrators": None,
 }
 
+#: modules other work will rewrite: their survivors (and equivalence notes) need a fresh look then
+LIKELY_TO_CHANGE = {
+    "twin.estimation.ekf": "issue 11 (self-calibrating, position-aware estimator)",
+    "twin.control.feedforward": "issue 15 (bounded planning horizons)",
+    "twin.control.plan": "issue 15 (bounded planning horizons)",
+    "twin.control.lqg": "issue 15 (gains along bounded horizons)",
+}
+
 #: mutmut exit codes -> status (mutmut.stats.status_by_exit_code)
 STATUS = {1: "killed", 3: "killed", 0: "survived", 5: "no tests", 33: "no tests", 36: "timeout", 24: "timeout",
           -24: "timeout", 152: "timeout", 255: "timeout", 34: "skipped", 37: "type check", None: "not checked"}
@@ -164,8 +172,9 @@ def report(out: Path) -> float:
             body = [head, "", "```diff", d, "```"]
             if note:
                 body += ["", f"Equivalent: {note['reason']}"]
-                if note.get("likely_to_change"):
-                    body += [f"Code likely to change: {note['likely_to_change']}"]
+            change = (note or {}).get("likely_to_change") or LIKELY_TO_CHANGE.get(module)
+            if change:
+                body += ["", f"Code likely to change: {change}"]
             details.append("\n".join(body))
     detected = tot["killed"] + tot["timeout"]
     score = detected / (tot["n"] - tot["equivalent"])
