@@ -80,9 +80,10 @@ def test_non_increasing_times_are_rejected():
     with pytest.raises(ValidationError, match="strictly increasing"):
         PointsReference(points=[(10.0, 500.0), (10.0, 600.0)])
     # a spec that bypassed validation still gets a clear error from the reference itself
-    bad = PointsReference.model_construct(points=[(10.0, 500.0), (5.0, 600.0)])
-    with pytest.raises(ReferenceError, match="strictly increasing"):
-        reference_trajectory(bad, 300.0)
+    for points in ([(10.0, 500.0), (5.0, 600.0)], [(10.0, 500.0), (10.0, 600.0)]):  # decreasing, repeated
+        bad = PointsReference.model_construct(points=points)
+        with pytest.raises(ReferenceError, match="strictly increasing"):
+            reference_trajectory(bad, 300.0)
 
 
 def test_unreachable_temperatures_are_rejected():
