@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -10,6 +12,8 @@ from controller_standin import make_standin
 from twin.config import small_config
 from twin.control.lqg import (
     Controller,
+    Gains,
+    RiccatiError,
     IntegratorState,
     anti_windup_delta,
     augmented_system,
@@ -354,13 +358,14 @@ def test_feedback_control_integrates_exactly_at_the_threshold_and_freezes_above(
     np.testing.assert_allclose(above.du, gains.K[0] @ np.append(np.full(standin.n, -0.5), 3.0), rtol=1e-12)
 
 
-def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg) -> None:
+@pytest.mark.parametrize("every", [1, 3])
+def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg, every) -> None:
     """The recursion (26), (29) with delta(u_ff,j) of Remark 5 in Phi~_j (24), written out here.
 
     u_ff alternates between a total above and below delta0; Phi_j, Gamma_j are held over 3 samples
     (jacobian_every = 3), so the design must switch delta inside a hold.
     """
-    N, every = 12, 3
+    N = 12
     c = small_config().with_overrides({"lqg.delta0": 1.5})
     u_lo, u_hi = np.full(standin.m, 0.4), np.full(standin.m, 0.6)  # totals 1.2 and 1.8 around 1.5
     u_ff = np.array([u_hi if j % 2 else u_lo for j in range(N)])
@@ -370,7 +375,9 @@ def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg) -> Non
     theta = np.array(theta)
     T = theta @ standin.c_m
     plan = FeedforwardPlan(np.arange(N + 1) * standin.t_s, u_ff, theta, T, T, "alternating", 0, 0.0, True)
+    t0 = time.perf_counter()
     gains = lqg_gains(standin, plan, c, jacobian_every=every)
+    assert gains.jacobian_every == every and 0.0 <= gains.design_s <= time.perf_counter() - t0
 
     w = c.lqg
     Q = weight_matrix(standin.c_m, w.q0, w.q1)
@@ -388,3 +395,16 @@ def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg) -> Non
     np.testing.assert_allclose(gains.K, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
     # delta matters: with the integrator row switched off the integral gain changes
     assert np.abs(gains.K[1][:, -1] - gains.K[0][:, -1]).max() > 1e-6 * np.abs(gains.K[0][:, -1]).max()
+
+
+def test_gain_lookup_beyond_the_plan_is_the_terminal_gain() -> None:
+    K = np.arange(3.0)[:, None, None] * np.ones((3, 2, 4))
+    gains = Gains(K, np.full((2, 4), 9.0), np.eye(4))
+    assert gains.at(0)[0, 0] == 0.0 and gains.at(2)[0, 0] == 2.0
+    assert gains.at(3)[0, 0] == 9.0 and gains.at(-1)[0, 0] == 9.0 and gains.jacobian_every == 1
+
+
+def test_dare_without_a_stabilising_solution_raises() -> None:
+    # x+ = 2 x, and the input cannot act on it (B = 0): no feedback stabilises it
+    with pytest.raises(RiccatiError), np.errstate(over="ignore", invalid="ignore"):  # the iterates blow up
+        dare(np.array([[2.0]]), np.array([[0.0]]), np.array([[1.0]]), 1.0)
