@@ -81,7 +81,11 @@ def load_results() -> dict[str, dict[str, str]]:
     """module -> {mutant name: status}, for the mutants in scope."""
     out: dict[str, dict[str, str]] = {}
     for meta in sorted((ROOT / "mutants").glob("twin/**/*.py.meta")):
-        data = json.loads(meta.read_text())
+        try:
+            data = json.loads(meta.read_text())
+        except ValueError:  # a run stopped while writing it: that module's results are lost
+            print(f"unreadable {meta}: skipped", file=sys.stderr)  # noqa: T201
+            continue
         module = str(meta.relative_to(ROOT / "mutants")).removesuffix(".py.meta").replace("/", ".")
         for name, code in data.get("exit_code_by_key", {}).items():
             if in_scope(name):
@@ -157,7 +161,7 @@ def report(out: Path) -> float:
             if st not in ("killed", "timeout"):
                 d = diff_of(name)
                 notes[name] = (d, equivalence(name, d, by_name, rules))
-        eq = sum(1 for d, note in notes.values() if note is not None)
+        eq = sum(1 for name, (d, note) in notes.items() if note is not None and res[name] in ("survived", "no tests"))
         n = len(res)
         detected = c["killed"] + c["timeout"]
         score = detected / (n - eq) if n > eq else float("nan")
@@ -213,7 +217,10 @@ def main() -> int:
     if a.scope:
         print(" ".join(scope_globs()))  # noqa: T201
     elif a.not_killed:
-        names = [n for res in load_results().values() for n, st in res.items() if st not in ("killed", "timeout")]
+        results = load_results()
+        names = [n for res in results.values() for n, st in res.items() if st not in ("killed", "timeout")]
+        # a module without results yet (never run, or its results lost): all of it
+        names += [g for g in scope_globs() if g.split(".x")[0].removesuffix(".*") not in results]
         print(" ".join(sorted(names)))  # noqa: T201
     elif a.out:
         score = report(a.out)

@@ -229,3 +229,18 @@ def test_estimator_steps_in_the_papers_order(furnace_model) -> None:
     # the estimate at any point is the FE interpolation of the nodes (eq. 7)
     pts = np.array([[0.1, 0.05], [0.2, 0.1]])
     np.testing.assert_allclose(est.estimate_at(pts), model.fe.phi(pts) @ est.state.theta, rtol=1e-15)
+
+
+@pytest.mark.parametrize(("precision", "dtype"), [("single", np.float32), ("double", np.float64)])
+def test_covariance_precision_chooses_the_product(furnace_model, precision, dtype) -> None:
+    """ekf.covariance_precision: Phi P Phi^T (15) formed in float32 ("single") or float64 ("double")."""
+    from twin.estimation.ekf import Estimator, propagate_covariance
+
+    cfg, model = furnace_model
+    cfg = cfg.with_overrides({"ekf.covariance_precision": precision})
+    est = Estimator(model, cfg, 900.0)
+    u = np.full(model.m, 0.4)
+    theta, P = est.state.theta.copy(), est.state.P.copy()
+    est.predict(u)
+    np.testing.assert_array_equal(est.state.P, propagate_covariance(model.jac_theta(theta, u).astype(dtype), P, est.Q))
+    np.testing.assert_array_equal(est.state.theta, model.step(theta, u))
