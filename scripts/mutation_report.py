@@ -21,6 +21,7 @@ import sys
 import tomllib
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 EQUIVALENT_FILE = ROOT / "scripts" / "mutation_equivalent.toml"
@@ -93,7 +94,7 @@ def load_results() -> dict[str, dict[str, str]]:
     return out
 
 
-def load_equivalents() -> tuple[dict[str, dict[str, str]], list[dict[str, str]]]:
+def load_equivalents() -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Equivalent mutants by name ([mutant."name"]) and by rule ([[rule]]: regexes on the changed lines)."""
     if not EQUIVALENT_FILE.exists():
         return {}, []
@@ -126,8 +127,18 @@ def _one_substitution(removed: str, added: str, subs: list[list[str]]) -> bool:
     return False
 
 
-def equivalence(name: str, diff: str, by_name: dict[str, dict[str, str]], rules: list[dict[str, str]]
-                ) -> dict[str, str] | None:
+def _rule_pair(removed: str, added: str, rule: dict[str, Any]) -> bool:
+    """A (removed, added) line pair that the rule explains: one substitution, or a change inside strings only."""
+    if rule.get("strings_only"):
+        def unquote(line: str) -> str:
+            return re.sub(r'"[^"]*"', '""', line)
+
+        return removed != added and unquote(removed) == unquote(added)
+    return _one_substitution(removed, added, rule.get("subs", []))
+
+
+def equivalence(name: str, diff: str, by_name: dict[str, dict[str, Any]], rules: list[dict[str, Any]]
+                ) -> dict[str, Any] | None:
     """Why the mutant is equivalent (an entry of mutation_equivalent.toml), or None.
 
     A rule matches a mutant whose changed lines pair up (removed, added) so that every pair is one
@@ -143,8 +154,7 @@ def equivalence(name: str, diff: str, by_name: dict[str, dict[str, str]], rules:
     for rule in rules:
         if rule.get("modules") and module not in rule["modules"]:
             continue
-        if all(re.search(rule.get("where", ""), r) and _one_substitution(r, a, rule["subs"])  # type: ignore[arg-type]
-               for r, a in zip(removed, added, strict=True)):
+        if all(re.search(rule.get("where", ""), r) and _rule_pair(r, a, rule) for r, a in zip(removed, added, strict=True)):
             return rule
     return None
 

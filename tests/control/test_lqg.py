@@ -323,6 +323,8 @@ def test_remark5_total_power_threshold(u, delta) -> None:
         ([1.0, np.nextafter(1.0, 0.0)], [-1.0, -1.0], -1.0, 1.0),  # one ulp below 1: that group follows
         ([1.3, 0.99], [-1.0, -1.0], -1.0, 1.0),  # one group clipped, the other can follow
         ([1.3, 1.1], [-1.0, 0.0], -1.0, 0.0),  # the free group is not pushed (k_int = 0)
+        ([1.3, 0.5], [-1.0, 0.0], -1.0, 0.0),  # nor is a group in the middle of its range that k_int ignores
+        ([-0.3, 0.5], [-1.0, 0.0], 1.0, 0.0),  # the same, pushed down with the pushed group at 0
         ([1.3, 1.1], [-1.0, -1.0], 1.0, 1.0),  # too hot: pushed down, groups at 1 can follow
         ([0.0, 0.0], [-1.0, -1.0], 1.0, 0.0),  # too hot, both at exactly 0: frozen
         ([0.0, np.nextafter(0.0, 1.0)], [-1.0, -1.0], 1.0, 1.0),  # one ulp above 0 follows
