@@ -154,7 +154,8 @@ def equivalence(name: str, diff: str, by_name: dict[str, dict[str, Any]], rules:
     for rule in rules:
         if rule.get("modules") and module not in rule["modules"]:
             continue
-        if all(re.search(rule.get("where", ""), r) and _rule_pair(r, a, rule) for r, a in zip(removed, added, strict=True)):
+        pairs = zip(removed, added, strict=True)
+        if all(re.search(rule.get("where", ""), r) and _rule_pair(r, a, rule) for r, a in pairs):
             return rule
     return None
 

@@ -13,8 +13,8 @@ from twin.config import small_config
 from twin.control.lqg import (
     Controller,
     Gains,
-    RiccatiError,
     IntegratorState,
+    RiccatiError,
     anti_windup_delta,
     augmented_system,
     dare,

@@ -138,7 +138,8 @@ def test_eta_function_starts_at_t0_moving_up() -> None:
 
     spec = OscillationSpec(enabled=True, amplitude=0.03, period=4.0)
     eta = eta_function(spec, t0=10.0)
-    assert eta(10.0) == 0.0 and eta(11.0) == pytest.approx(0.03, rel=1e-12) and eta(12.0) == pytest.approx(0.0, abs=1e-15)
+    assert eta(10.0) == 0.0 and eta(11.0) == pytest.approx(0.03, rel=1e-12)
+    assert eta(12.0) == pytest.approx(0.0, abs=1e-15)
     assert eta(13.0) == pytest.approx(-0.03, rel=1e-12) and eta(9.0) == pytest.approx(-0.03, rel=1e-12)
     # a zero amplitude or a disabled spec holds the specimen at eta = 0 whatever the period
     assert eta_function(OscillationSpec(enabled=True, amplitude=0.0, period=4.0))(1.0) == 0.0
