@@ -72,7 +72,12 @@ def test_every_lamp_is_addressable(plant, cfg):
 
 
 def test_energy_balance_over_an_oscillating_run(plant):
-    """Change of stored enthalpy = integral of absorbed - emitted - convective - holder, within 0.5 %."""
+    """Change of stored enthalpy = integral of absorbed - emitted - convective - holder, within 0.5 %.
+
+    This checks the time stepping against the plant's own bookkeeping (both use the same P1, P2);
+    the radiation terms themselves are checked from the exchange factors, lamp by lamp and position
+    by position, in tests/radiation/test_exchange_properties.py.
+    """
     eta = eta_function(OSC)
     state = plant.start(np.full(plant.n, 300.0))
     E0 = stored_energy(plant, state.T)
