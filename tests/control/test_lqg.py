@@ -395,6 +395,8 @@ def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg, every)
                                   standin.c_m, standin.t_s, delta)
         P, expected[j] = riccati_step(P, Pt, Gt, Q, w.r0)
     np.testing.assert_allclose(gains.K, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
+    if every == 1:  # the default is a Jacobian at every sample
+        np.testing.assert_array_equal(lqg_gains(standin, plan, c).K, gains.K)
     # delta matters: with the integrator row switched off the integral gain changes
     assert np.abs(gains.K[1][:, -1] - gains.K[0][:, -1]).max() > 1e-6 * np.abs(gains.K[0][:, -1]).max()
 

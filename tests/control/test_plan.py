@@ -21,7 +21,7 @@ def _plan(t0: float = 10.0, n: int = 4) -> FeedforwardPlan:
     theta = 100.0 * np.arange(n + 1, dtype=float)[:, None] * np.ones((1, 3))
     return FeedforwardPlan(t=t, u_ff=u, theta_ref=theta, T_ref=1000.0 + np.arange(n + 1), T_mean=np.zeros(n + 1),
                            status="by hand", iterations=0, solve_s=0.0, success=True,
-                           warm={"t_knots": np.array([10.0, 11.0, 12.0]), "v": np.array([5.0, 6.0, 7.0])})
+                           warm={"t_knots": np.array([10.0, 11.0, 12.0, 13.0]), "v": np.array([5.0, 6.0, 7.0])})
 
 
 def test_index_of_a_run_time_is_the_nearest_sample() -> None:
@@ -44,9 +44,9 @@ def test_samples_hold_the_last_values_beyond_the_horizon() -> None:
 
 
 def test_v_is_held_over_each_ocp_interval_and_outside() -> None:
-    plan = _plan()
-    t = np.array([9.0, 10.0, 10.5, 11.0, 11.999, 12.0, 50.0])
-    np.testing.assert_array_equal(plan.v_at(t), [5.0, 5.0, 5.0, 6.0, 6.0, 7.0, 7.0])
+    plan = _plan()  # as the OCP stores them: K + 1 knot times (interval ends included), K values
+    t = np.array([9.0, 10.0, 10.5, 11.0, 11.999, 12.0, 13.0, 50.0])
+    np.testing.assert_array_equal(plan.v_at(t), [5.0, 5.0, 5.0, 6.0, 6.0, 7.0, 7.0, 7.0])
 
 
 def test_max_mean_error_is_the_largest_tracking_gap() -> None:
@@ -102,6 +102,24 @@ def test_mean_time_constant_is_the_inverse_loss_rate() -> None:
     assert mean_time_constant(_Linear(L, np.ones((n, 1))), np.zeros(n), [0.0]) == pytest.approx(1e6)
 
 
+@dataclass
+class _Radiating(_Linear):
+    """theta+ = theta + t_s (A theta - k theta^4 + B u): the Jacobian depends on the state."""
+
+    k: float = 1e-11
+
+    def jac_theta(self, theta, u):
+        return np.eye(self.n) + self.t_s * (self.A - np.diag(4.0 * self.k * np.asarray(theta) ** 3))
+
+
+def test_time_scales_are_taken_at_the_given_state() -> None:
+    # uniform 1000 K: the loss rate is a + 4 k T^3 = 0.04 + 0.04 1/s, tau = 12.5 s (by hand)
+    model = _Radiating(-0.04 * np.eye(3), np.ones((3, 1)))
+    assert mean_time_constant(model, np.full(3, 1000.0), [0.0]) == pytest.approx(12.5, rel=1e-12)
+    # the fastest rate of the diagonal Jacobian: the hottest node, 0.04 + 4e-11 * 1500^3 = 0.175 1/s
+    assert _fastest_rate(model, np.array([1000.0, 1500.0, 500.0]), np.zeros(1)) == pytest.approx(0.175, rel=1e-12)
+
+
 def test_fastest_rate_is_the_spectral_radius_of_the_continuous_jacobian() -> None:
     # J = [[-1, 2], [-2, -1]] has the eigenvalues -1 +- 2i: |lambda| = sqrt(5)
     model = _Linear(np.array([[-1.0, 2.0], [-2.0, -1.0]]), np.zeros((2, 1)))
@@ -129,6 +147,14 @@ def test_transition_end_of_a_callable_is_the_first_sample_after_it_stops_moving(
         return 1000.0 + np.minimum(np.asarray(t, float), MAX_REFERENCE_S)
 
     assert transition_end(slow, 0.0, 0.1) == pytest.approx(MAX_REFERENCE_S)
+    # the threshold is exactly 1e-9 x max(1 K, |final|): a change of exactly that is not motion
+    assert transition_end(lambda t: 1e-9 * (np.asarray(t) < 5.0), 0.0, 0.1) == 0.0
+    # ... and the scale is the final value, not an early one: 0 K at the start, then 5e-7 K below 1000 K
+    def late(t):
+        t = np.asarray(t, float)
+        return np.where(t < 1.0, 0.0, np.where(t < 20.0, 1000.0 - 5e-7, 1000.0))
+
+    assert transition_end(late, 0.0, 0.1) == pytest.approx(1.0)
     # a change far below 1e-9 relative of the final value is not motion (round-off of a held value)
     assert transition_end(lambda t: 1000.0 + 1e-10 * (np.asarray(t) < 5.0), 0.0, 0.1) == 0.0
     # ... but a change of 1e-6 K at 1000 K is (1e-9 x 1000 K = 1e-6 K is the threshold: strictly above)

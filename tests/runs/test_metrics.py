@@ -9,8 +9,8 @@ from twin.physics.fillet import Fillet
 from twin.runs.metrics import METRIC_KEYS, compute_metrics, window
 
 
-def _series(n_t: int = 201, t_E: float = 10.0) -> dict:
-    t = np.linspace(0.0, 2 * t_E, n_t)
+def _series(n_t: int = 201, t_E: float = 10.0, t_end: float | None = None) -> dict:
+    t = np.linspace(0.0, 2 * t_E if t_end is None else t_end, n_t)
     x = (np.arange(26) + 0.5) * 0.4 / 26
     y = (np.arange(17) + 0.5) * 0.2 / 17
     T_ref = np.minimum(300 + 80 * t, 1100.0)
@@ -78,17 +78,19 @@ def test_stopped_run_gives_nan_for_missing_windows():
 
 
 def test_each_metric_sees_only_its_window():
-    """Errors placed in one time span at a time, on the 0.1 s grid of a t_E = 10 s run (product.md windows).
+    """Errors placed in one time span at a time, on a 0.05 s grid of a t_E = 10 s run that goes on to 2.5 t_E.
 
-    Spans: start (t < t_E / 10: transient only, not after-start), between (t_E < t < 1.5 t_E: no
-    window), steady (1.5..2 t_E).  An error outside a metric's window must not change it.
+    Spans (product.md windows): start (t < t_E / 10: transient only, not after-start; 0.95 s is in it),
+    between (t_E < t < 1.5 t_E: no window), steady (1.5..2 t_E), late (t > 2 t_E, a run longer than
+    2 t_E: no window but after-start).  An error outside a metric's window must not change it.
     """
-    t = _series()["t"]
-    spans = {"start": t < 0.95, "between": (t > 10.05) & (t < 14.95), "steady": t >= 15.0}
+    t = _series(n_t=501, t_E=10.0, t_end=25.0)["t"]
+    spans = {"start": t < 0.97, "between": (t > 10.02) & (t < 14.98), "steady": (t >= 15.0) & (t <= 20.0),
+             "late": t > 20.02}
     expected_in = {  # metric -> spans it sees
         "mean_error_transient_max": {"start"},
         "mean_error_steady_max": {"steady"},
-        "tc123_error_max": {"between", "steady"},
+        "tc123_error_max": {"between", "steady", "late"},
         "tc4_error_transient_max": {"start"},
         "tc4_error_steady_max": {"steady"},
         "inhomogeneity_transient_max": {"start"},
@@ -98,7 +100,7 @@ def test_each_metric_sees_only_its_window():
         "field_estimation_error_steady_max": {"steady"},
     }
     for span, sel in spans.items():
-        ts = _series()
+        ts = _series(n_t=501, t_E=10.0, t_end=25.0)
         ts["T_mean_hat"][sel] += 22.0  # 2 % of the 1100 K setpoint
         ts["tc"][sel] += 22.0  # every TC, so TC1..3 and TC4
         ts["field_hat"][sel, 8, 13] += 22.0  # fillet centre: 2 % sup-norm, 2 % estimation error
