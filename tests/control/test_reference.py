@@ -229,3 +229,13 @@ def test_transition_is_monotone_c1_and_the_cubic_step(T0, T_E, t_E, t_start) -> 
     assert (np.sign(T_E - T0) * d >= -1e-9 * max(T0, T_E)).all()
     jv, js = _c1_jumps(ref, [t_start, t_start + t_E], h=1e-6 * t_E)
     assert jv < 1e-9 * max(T0, T_E) and js < 1e-3 * (abs(T_E - T0) / t_E + 1.0)
+
+
+def test_steady_state_that_does_not_converge_is_a_reference_error():
+    model = make_standin()
+    u = np.full(model.m, 0.5)
+    with pytest.raises(ReferenceError, match="steady state of the model did not converge in 1 iterations"):
+        steady_state(model, u, np.full(model.n, 300.0), max_iter=1)
+    # from a cold start far below the fixed point Newton's steps are capped at 500 K and still converge
+    theta = steady_state(model, u, np.full(model.n, 300.0))
+    assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6
