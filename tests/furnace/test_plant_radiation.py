@@ -245,3 +245,48 @@ def test_plant_rtf_times_the_papers_oscillating_run(cfg, small_radiation, monkey
     assert dt == t_s
     # eta = 3 L_h sin(2 pi t / 18 s), capped at eta_max: the amplitude at a quarter period
     assert eta(4.5) == pytest.approx(min(3 * cfg.lamps.horizontal.pitch, cfg.oscillation.eta_max), rel=1e-12)
+
+
+@pytest.mark.parametrize("method", ["rk4", "heun", "ab2"])
+def test_one_sub_step_is_the_textbook_step(cfg, small_radiation, method):
+    """advance over dt = max_substep is one step of the method, written out with the plant's rhs (eqs. 1-6):
+    RK4 and Heun by their Butcher tableaux; AB2 starts with Heun and continues with
+    T2 = T1 + h (3/2 f(T1) - 1/2 f(T0)), the history's lamp term re-evaluated for a changed input."""
+    plant = Plant(cfg, small_radiation, method=method, radiation_dtype=np.float64)
+    T0 = np.random.default_rng(8).uniform(700.0, 900.0, plant.n)
+    eta = eta_function(OSC)
+    h = 0.05  # s, well inside the stability limit (so one sub-step covers dt)
+
+    def f(t, T, u=U):
+        return plant.rhs(T, u, eta(t))
+
+    if method == "rk4":
+        k1 = f(0.0, T0)
+        k2 = f(h / 2, T0 + h / 2 * k1)
+        k3 = f(h / 2, T0 + h / 2 * k2)
+        k4 = f(h, T0 + h * k3)
+        expected = T0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    else:
+        k1 = f(0.0, T0)
+        expected = T0 + h / 2 * (k1 + f(h, T0 + h * k1))
+    state = plant.advance(plant.start(T0), U, h, eta, max_substep=h)
+    assert state.t == h
+    np.testing.assert_allclose(state.T, expected, rtol=1e-13, atol=0)
+    if method == "ab2":
+        U2 = np.array([0.2, 0.9, 0.1, 0.8, 0.3, 0.6])  # the held input changes between the samples
+        T2 = plant.advance(state, U2, h, eta, max_substep=h).T
+        expected2 = state.T + h * (1.5 * f(h, state.T, U2) - 0.5 * f(0.0, T0, U2))
+        np.testing.assert_allclose(T2, expected2, rtol=1e-12, atol=0)
+
+
+def test_simulate_records_every_sample(cfg, small_radiation):
+    plant = Plant(cfg, small_radiation)
+    eta = eta_function(OSC)
+    T0 = np.full(plant.n, 650.0)
+    ts, states = plant.simulate(T0, lambda t: U * (t < 0.25), eta, 0.5, 0.1)
+    np.testing.assert_allclose(ts, [0.0, 0.1, 0.2, 0.3, 0.4, 0.5], atol=1e-15)
+    np.testing.assert_array_equal(states[0], T0)
+    state = plant.start(T0)
+    for j in range(5):  # the same as advancing sample by sample with the input of each sample
+        state = plant.advance(state, U * (ts[j] < 0.25), 0.1, eta)
+        np.testing.assert_array_equal(states[j + 1], state.T)
