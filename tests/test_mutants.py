@@ -149,3 +149,26 @@ def test_planting_swaps_and_restores_the_code() -> None:
     t_ekf = _test_module("estimation/test_ekf.py")
     with planted(same):
         assert not _killed(t_ekf.test_process_noise_worked_example)
+
+
+def test_the_equivalence_rules_of_the_mutation_report_are_well_formed() -> None:
+    """scripts/mutation_equivalent.toml parses, every entry has a reason, every pattern compiles, and
+    the rules accept what they describe and nothing next to it (scripts/mutation_report.py)."""
+    import re
+
+    sys.path.insert(0, str(TESTS.parent / "scripts"))
+    try:
+        import mutation_report as mr
+    finally:
+        sys.path.remove(str(TESTS.parent / "scripts"))
+    by_name, rules = mr.load_equivalents()
+    assert rules and all(r["reason"].strip() for r in [*rules, *by_name.values()])
+    for rule in rules:
+        assert rule.get("strings_only") or rule["subs"], rule["reason"][:40]
+        for pattern, _ in rule.get("subs", []):
+            re.compile(pattern)
+        re.compile(rule.get("where", ""))
+    dtype = next(r for r in rules if r["reason"].startswith("The dtype argument"))
+    assert mr._rule_pair("v = np.asarray(x, float)", "v = np.asarray(x, None)", dtype)
+    assert not mr._rule_pair("v = np.asarray(x, float)", "v = np.asarray(float)", dtype)  # not a dtype change
+    assert not mr._rule_pair("v = np.asarray(x, float)", "v = np.asarray(None, float)", dtype)
