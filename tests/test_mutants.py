@@ -2,11 +2,11 @@
 
 The full mutation run (``bash scripts/mutation.sh``, report in docs/mutation-report.md) takes too long
 for CI.  These mutants are the ones that matter most: the four one-line bugs that once survived the
-whole suite (the EKF's measurement gate, both anti-windup conditions, a run metric's window) and
-places mutmut does not mutate (decorated functions: the FE matrices; the net-radiation algebra
-outside its scope).  Each is planted by swapping the function's code object for one compiled
-from the edited source, the named tests are run against it and must fail, and the original code
-is restored.
+whole suite (the EKF's measurement gate, both anti-windup conditions, a run metric's window), places
+mutmut does not mutate (decorated functions: the FE matrices; the net-radiation algebra outside its
+scope) and the integrators and the model Jacobian, whose full mutation run is the longest.  Each is
+planted by swapping the function's code object for one compiled from the edited source, the named
+tests are run against it and must fail, and the original code is restored.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ import numpy as np
 
 import twin.control.lqg as lqg
 import twin.estimation.ekf as ekf
+import twin.furnace.simulated.integrators as integrators
+import twin.model.discrete as discrete
 import twin.model.fe as fe
 import twin.radiation.net_radiation as net_radiation
 import twin.runs.metrics as metrics
@@ -90,6 +92,9 @@ def _mutants(small_radiation) -> list[Mutant]:
     t_rad = _test_module("radiation/test_exchange_properties.py")
     t_metrics = _test_module("runs/test_metrics.py")
     t_lqg = _test_module("control/test_lqg.py")
+    t_cond = _test_module("furnace/test_plant_conduction.py")
+    t_plant = _test_module("furnace/test_plant_radiation.py")
+    t_disc = _test_module("model/test_discrete.py")
 
     standin, cfg = t_lqg.make_standin(), t_lqg.small_config()
     enclosure = t_rad.enclosure_balance(small_radiation)  # from F^s only: no mutated code involved
@@ -108,7 +113,7 @@ def _mutants(small_radiation) -> list[Mutant]:
                (bind(t_lqg.test_clamp_rule_at_the_input_bounds, [1.0, 1.0], [-1.0, -1.0], -1.0, 0.0),)),
         Mutant("design: delta of Remark 5 ignored in the gains", lqg.anti_windup_delta,
                "0.0 if float(np.sum(u)) > delta0 else 1.0", "1.0",
-               (bind(t_lqg.test_gains_use_delta_of_the_feedforward_at_every_sample, standin, cfg),)),
+               (bind(t_lqg.test_gains_use_delta_of_the_feedforward_at_every_sample, standin, cfg, 3),)),
         Mutant("metric: the steady sup-norm averaged over the wrong window", metrics.compute_metrics,
                'trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")',
                'trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "after_start")',
@@ -119,6 +124,15 @@ def _mutants(small_radiation) -> list[Mutant]:
                "(np.kron(self._mass_y, kx) + np.kron(ky, self._mass_x))", "(np.kron(self._mass_y, kx))",
                # a new FEModel per call: K is a cached property
                (lambda: t_fe.test_mass_and_stiffness_match_textbook_element_matrices(t_fe.FEModel(cfg)),)),
+        Mutant("AB2: the constant-step coefficient used with varying steps", integrators._advance_ab2,
+               "r = h / (2.0 * prev.h)", "r = 0.5", (t_cond.test_ab2_keeps_second_order_with_varying_steps,)),
+        Mutant("RK4: the stage weights dropped", integrators._advance_rk,
+               "T += (h * bi) * ki", "T += (h / len(b)) * ki",
+               (bind(t_plant.test_one_sub_step_is_the_textbook_step, cfg, small_radiation, "rk4"),)),
+        Mutant("model: the radiation term's Jacobian 3 T^3 instead of 4 T^3 (eq. 16)", discrete.DiscreteModel.jac_theta,
+               "(4.0 * self.t_s * T**3)", "(3.0 * self.t_s * T**3)",
+               (lambda: t_disc.test_jacobians_match_finite_differences(
+                   {"fixed": discrete.discrete_model(cfg, small_radiation, None)}, t_fe.FEModel(cfg), "fixed"),)),
         Mutant("radiation: P2 without the lamp surface scale", net_radiation.specimen_matrices,
                "P2_faces = X * lamp_flux_scale[None, :]", "P2_faces = X",
                (bind(t_rad.test_the_specimens_share_is_the_models_P2, enclosure, small_radiation),)),
