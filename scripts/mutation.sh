@@ -9,8 +9,8 @@
 #   bash scripts/mutation.sh 'twin.runs.metrics.*'   # only these mutants (mutmut name globs)
 #
 # Runs niced (the machine is shared).  Results are cached in ./mutants: a second run only tests
-# mutants without a result, so after adding tests, re-test the survivors with
-# `bash scripts/mutation.sh --survivors`.
+# mutants without a result, so after adding tests, re-test the survivors (all that are not killed and
+# not listed as equivalent) with `bash scripts/mutation.sh --survivors`.
 set -euo pipefail
 set -f  # the mutant name globs are for mutmut, not for the shell
 cd "$(dirname "$0")/.."
@@ -29,7 +29,7 @@ case "${1:-}" in
   --survivors)
     # tests changed: re-collect which tests cover which function, then re-test what was not killed
     rm -f mutants/mutmut-stats.json
-    names=$(.venv/bin/python scripts/mutation_report.py --not-killed)
+    names=$(.venv/bin/python scripts/mutation_report.py --not-killed --skip-equivalent)
     if [ -n "$names" ]; then nice -n 19 .venv/bin/mutmut run --max-children 2 $names; fi ;;
   "") nice -n 19 .venv/bin/mutmut run --max-children 2 $(scope) ;;
   *) nice -n 19 .venv/bin/mutmut run --max-children 2 "$@" ;;

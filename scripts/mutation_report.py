@@ -224,6 +224,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scope", action="store_true", help="print the mutmut name globs in scope")
     ap.add_argument("--not-killed", action="store_true", help="print the names of the mutants not killed")
+    ap.add_argument("--skip-equivalent", action="store_true", help="with --not-killed: leave out the equivalent ones")
     ap.add_argument("--out", type=Path, help="write the report here")
     a = ap.parse_args()
     if a.scope:
@@ -231,6 +232,9 @@ def main() -> int:
     elif a.not_killed:
         results = load_results()
         names = [n for res in results.values() for n, st in res.items() if st not in ("killed", "timeout")]
+        if a.skip_equivalent:
+            by_name, rules = load_equivalents()
+            names = [n for n in names if equivalence(n, diff_of(n), by_name, rules) is None]
         # a module without results yet (never run, or its results lost): all of it
         names += [g for g in scope_globs() if g.split(".x")[0].removesuffix(".*") not in results]
         print(" ".join(sorted(names)))  # noqa: T201
