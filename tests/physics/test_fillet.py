@@ -122,3 +122,13 @@ def test_fillet_mean_is_linear_bounded_and_the_area_integral(case) -> None:
     # a constant field is its own mean; T_sup of a field against itself is 0
     assert fillet.mean(np.full((ny, nx), 812.5)) == pytest.approx(812.5, rel=1e-14)
     assert fillet.sup(F, fillet.mean(F)) == fillet.spread(F)
+
+
+def test_batches_of_flat_fields() -> None:
+    cfg = small_config()
+    fillet = Fillet.of(cfg)
+    rng = np.random.default_rng(2)
+    T = rng.uniform(500.0, 900.0, (3, cfg.specimen.n_states))  # three fields in the state order (..., N_s)
+    np.testing.assert_allclose(fillet.mean(T), [_oracle_mean(cfg, row) for row in T], rtol=1e-13)
+    np.testing.assert_allclose(fillet.sup(T, np.array([600.0, 700.0, 800.0])),
+                               [fillet.sup(row, ref) for row, ref in zip(T, (600.0, 700.0, 800.0), strict=True)])
