@@ -6,9 +6,9 @@ report: per module killed / survived / timeout / no tests / score, and every mut
 killed with its diff and, if it is listed in ``scripts/mutation_equivalent.toml``, why it is
 equivalent (no test can tell it from the original).
 
-Score = detected / (mutants - equivalent), detected = killed + timeout (a mutant that hangs the
-tests is caught by the suite's time limits too).  The raw score (equivalents counted as
-survivors) is given beside it.
+Score = detected / (checked - equivalent), detected = killed + timeout (a mutant that hangs the
+tests is caught by the suite's time limits too), checked = the mutants the run reached.  The raw
+score (equivalents counted as survivors) is given beside it.
 """
 
 from __future__ import annotations
@@ -174,10 +174,11 @@ def report(out: Path) -> float:
                 notes[name] = (d, equivalence(name, d, by_name, rules))
         eq = sum(1 for name, (d, note) in notes.items() if note is not None and res[name] in ("survived", "no tests"))
         n = len(res)
+        checked = n - c["not checked"]
         detected = c["killed"] + c["timeout"]
-        score = detected / (n - eq) if n > eq else float("nan")
+        score = detected / (checked - eq) if checked > eq else float("nan")
         rows.append(f"| {module} | {n} | {c['killed']} | {c['survived']} | {c['timeout']} | {c['no tests']} "
-                    f"| {c['not checked']} | {eq} | {100 * score:.1f} % | {100 * detected / n:.1f} % |")
+                    f"| {c['not checked']} | {eq} | {100 * score:.1f} % | {100 * detected / max(checked, 1):.1f} % |")
         tot.update(c)
         tot["equivalent"] += eq
         tot["n"] += n
@@ -192,18 +193,21 @@ def report(out: Path) -> float:
                 body += ["", f"Code likely to change: {change}"]
             details.append("\n".join(body))
     detected = tot["killed"] + tot["timeout"]
-    score = detected / (tot["n"] - tot["equivalent"])
+    checked = tot["n"] - tot["not checked"]
+    score = detected / (checked - tot["equivalent"])
     rows.append(f"| **all** | {tot['n']} | {tot['killed']} | {tot['survived']} | {tot['timeout']} | "
                 f"{tot['no tests']} | {tot['not checked']} | {tot['equivalent']} | **{100 * score:.1f} %** | "
-                f"{100 * detected / tot['n']:.1f} % |")
+                f"{100 * detected / checked:.1f} % |")
     text = "\n".join([
         "# Mutation report of the numerics",
         "",
         "Written by `bash scripts/mutation.sh` (mutmut, settings in `[tool.mutmut]` of pyproject.toml; scope and",
         "score in `scripts/mutation_report.py`; equivalent mutants with their reasons in",
-        "`scripts/mutation_equivalent.toml`).  Score = (killed + timeout) / (mutants - equivalent); the raw",
-        "score counts the equivalent ones as survivors.  Not mutated by mutmut: module-level constants and",
-        "decorated functions (properties, cached properties), e.g. the FE matrices M, K, G, M_theta, c_m;",
+        "`scripts/mutation_equivalent.toml`).  Score = (killed + timeout) / (checked - equivalent), checked =",
+        "mutants - not checked (a run stopped before it reached them: `bash scripts/mutation.sh --survivors`",
+        "goes on); the raw score counts the equivalent ones as survivors.  Not mutated by mutmut:",
+        "module-level constants and decorated functions (properties, cached properties), e.g. the FE",
+        "matrices M, K, G, M_theta, c_m;",
         "`tests/test_mutants.py` plants fixed mutants there (and at the places the suite once missed).",
         "The score before issue 17's tests: docs/mutation-before.md.",
         "",
