@@ -45,6 +45,7 @@ import numpy as np
 
 from backend.threaded_server import free_port
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget
 from twin.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -249,8 +250,8 @@ def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float) -> di
 def _bare_rtf(cfg: FurnaceConfig, sim_s: float) -> float:
     from backend.loop_factory import DefaultLoopFactory
 
-    factory = DefaultLoopFactory()
-    loop: Any = factory(cfg, Scenario.model_validate({"duration": 3600.0, "speed": "max"}))
+    factory = DefaultLoopFactory(processes=False)  # this process, to compare with the server's rate
+    loop: Any = factory(cfg, Scenario.model_validate({"duration": 3600.0, "speed": "max"}), budget=PlanBudget())
     try:
         t0 = time.perf_counter()
         first = last = loop.step()

@@ -4,9 +4,9 @@ With the loops in the server's threads, two runs at speed ``max`` keep the inter
 busy, and every websocket send of the event loop (each one releases and retakes it) waits for it:
 the frames of the other clients come late.  :class:`ProcessLoop` runs ``twin.runs.loop.ClosedLoop``
 in a child process and answers the calls the run worker makes (``backend.run_worker.LoopLike``):
-each ``step()`` is one round trip over a pipe that returns the sample's snapshot.  The child writes
-the run's time series itself (:meth:`ProcessLoop.save_timeseries`), so flushes do not copy it
-between processes.  Runs at speed ``max`` get a lower CPU priority (``nice``): the server and the
+each ``step()`` is one round trip over a pipe that returns the sample's snapshot.  The child appends
+the run's time series itself (:meth:`ProcessLoop.append_series`, ``twin.runs.series_store``), so
+flushes do not copy it between processes.  Runs at speed ``max`` get a lower CPU priority (``nice``): the server and the
 runs paced in real time come first.
 
 Children are forked from a fork server (``multiprocessing``'s "forkserver", safe with the server's
@@ -22,11 +22,13 @@ import logging
 import multiprocessing
 import os
 import signal
+from concurrent.futures import Future
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -43,6 +45,13 @@ def _context() -> Any:
         ctx.set_forkserver_preload(PRELOAD)
         _CONTEXT = ctx
     return _CONTEXT
+
+
+def _settle(fut: Future[float], ok: bool, value: Any) -> None:
+    if ok:
+        fut.set_result(value)
+    else:
+        fut.set_exception(value)
 
 
 class LoopProcessError(RuntimeError):
@@ -70,8 +79,10 @@ def _portable(exc: BaseException) -> BaseException:
         return kind(f"{type(exc).__name__}: {exc}")
 
 
-def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int) -> None:  # pragma: no cover - child
-    """The child: build the loop, then answer (method, args) messages until "close"."""
+def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
+           limits: tuple[float, float]) -> None:  # pragma: no cover - child
+    """The child: build the loop (its plans within ``limits`` = (max_wall_s, max_memory_mb)), then answer
+    (method, args) messages until "close"."""
     _die_with_parent()
     if niceness:
         os.nice(niceness)
@@ -84,15 +95,29 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int) -
     from twin.radiation import radiation_model
     from twin.runs.loop import ClosedLoop
     from twin.runs.record import save_arrays
+    from twin.runs.series_store import SeriesStore
 
     try:
         cfg = FurnaceConfig.model_validate_json(cfg_json)
         scenario = Scenario.model_validate_json(scenario_json)
-        loop = ClosedLoop(cfg, scenario, radiation_model(cfg), background=True)
+        loop = ClosedLoop(cfg, scenario, radiation_model(cfg), background=True, budget=PlanBudget(*limits))
     except BaseException as exc:
         conn.send(("error", _portable(exc)))
         return
     conn.send(("ok", {"tc_positions": loop.tc_positions, "done": loop.done}))
+    store: SeriesStore | None = None
+    changes: dict[int, Future[float]] = {}  # changes still being planned (twin.runs.replanning), by id
+
+    def outcome(fut: Future[float]) -> tuple[bool, Any]:
+        exc = fut.exception()
+        return (True, fut.result()) if exc is None else (False, _portable(exc))
+
+    def settled() -> dict[int, tuple[bool, Any]]:
+        done = {k: outcome(f) for k, f in changes.items() if f.done()}
+        for k in done:
+            del changes[k]
+        return done
+
     while True:
         try:
             method, args = conn.recv()
@@ -104,9 +129,26 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int) -
                 conn.send(("ok", None))
                 break
             if method == "step":
-                result: Any = (loop.step(), loop.done)
+                snap = loop.step()
+                result: Any = (snap, loop.done, settled(), loop.replanning)
+            elif method in ("set_reference", "set_oscillation"):
+                fut = getattr(loop, method)(*args)
+                if not isinstance(fut, Future):
+                    result = ("done", (True, None))
+                elif fut.done():
+                    result = ("done", outcome(fut))
+                else:
+                    key = id(fut)
+                    changes[key] = fut
+                    result = ("later", key)
+            elif method == "replanning":
+                result = loop.replanning
             elif method == "save_timeseries":
                 save_arrays(args[0], loop.timeseries(), compress=False)
+                result = None
+            elif method == "append_series":
+                store = store or SeriesStore(Path(args[0]))
+                store.append(loop.record)
                 result = None
             else:
                 result = getattr(loop, method)(*args)
@@ -118,22 +160,32 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int) -
 class ProcessLoop:
     """``ClosedLoop(cfg, scenario)`` in a child process (module docstring); the run worker's ``LoopLike``."""
 
-    def __init__(self, cfg: FurnaceConfig, scenario: Scenario, *, niceness: int = 0) -> None:
+    def __init__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget | None = None,
+                 niceness: int = 0) -> None:
+        budget = budget or PlanBudget()
         ctx = _context()
         here, there = ctx.Pipe()
         self._proc = ctx.Process(target=_serve, args=(there, cfg.model_dump_json(), scenario.model_dump_json(),
-                                                      niceness), name="furnace-run", daemon=True)
+                                                      niceness, (budget.max_wall_s, budget.max_memory_mb)),
+                                 name="furnace-run", daemon=True)
         self._proc.start()
         there.close()
         self._conn: Connection = here
         self._closed = False
         try:
-            info = self._reply()  # the child built its loop (the first plan: seconds)
+            while not self._conn.poll(0.1):  # the child builds its loop (the first plan: seconds)
+                if budget.cancelled:  # Stop while starting: the child's plan is abandoned with it
+                    raise PlanCancelled("stopped while the run's first plan was being made")
+                if not self._proc.is_alive() and not self._conn.poll(0):
+                    break
+            info = self._reply()
         except BaseException:
             self._kill()
             raise
         self.tc_positions = info["tc_positions"]
         self._done = bool(info["done"])
+        self._changes: dict[int, Future[float]] = {}  # the child's changes still being planned
+        self._replanning = False
 
     def _reply(self) -> Any:
         try:
@@ -155,15 +207,38 @@ class ProcessLoop:
     def done(self) -> bool:
         return self._done
 
+    @property
+    def replanning(self) -> bool:
+        """A re-plan is being solved in the child (at speed max the run worker waits for it); asks the child
+        only while the last answer (of a step or a change) said so."""
+        if self._replanning:
+            self._replanning = bool(self._call("replanning"))
+        return self._replanning
+
     def step(self) -> Any:
-        snap, self._done = self._call("step")
+        snap, self._done, settled, self._replanning = self._call("step")
+        for key, (ok, value) in settled.items():  # changes whose plan came into force (or failed)
+            fut = self._changes.pop(key, None)
+            if fut is not None:
+                _settle(fut, ok, value)
         return snap
 
-    def set_reference(self, ref: Reference) -> None:
-        self._call("set_reference", ref)
+    def _change(self, method: str, arg: Any) -> Future[float]:
+        """The child's future of a change as a future here: settled with the step that installs it."""
+        kind, value = self._call(method, arg)
+        fut: Future[float] = Future()
+        if kind == "later":
+            self._changes[value] = fut
+            self._replanning = True
+        else:
+            _settle(fut, *value)
+        return fut
 
-    def set_oscillation(self, spec: OscillationSpec) -> None:
-        self._call("set_oscillation", spec)
+    def set_reference(self, ref: Reference) -> Future[float]:
+        return self._change("set_reference", ref)
+
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
+        return self._change("set_oscillation", spec)
 
     def set_faults(self, faults: list[FaultSpec]) -> None:
         self._call("set_faults", faults)
@@ -179,6 +254,11 @@ class ProcessLoop:
     def save_timeseries(self, path: Path) -> None:
         """Write the time series (``timeseries.npz`` layout) to ``path`` from the child, atomically."""
         self._call("save_timeseries", str(path))
+
+    def append_series(self, folder: str) -> None:
+        """Append the samples since the last call to the run's series parts in ``folder``
+        (``twin.runs.series_store``), from the child."""
+        self._call("append_series", folder)
 
     def metrics(self) -> dict[str, Any]:
         got: dict[str, Any] = self._call("metrics")
@@ -196,6 +276,9 @@ class ProcessLoop:
         self._proc.join(timeout=10)
         if self._proc.is_alive():
             self._kill()
+        for fut in self._changes.values():  # the run ended before these were planned
+            fut.set_exception(PlanCancelled("the run ended before the change was planned"))
+        self._changes.clear()
 
     def _kill(self) -> None:
         self._closed = True

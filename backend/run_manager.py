@@ -33,7 +33,9 @@ from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
+from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, check, parse_faults
 
@@ -57,6 +59,10 @@ class TooManyRuns(RuntimeError):
 
 class _StoppedWhileQueued(Exception):
     """A run stopped before its model was ready (it ends ``stopped`` with no data)."""
+
+
+class InsufficientStorage(RuntimeError):
+    """The data directory's quota or the disk's free space has no room for the run (507)."""
 
 
 class LimitExceeded(ValueError):
@@ -113,6 +119,7 @@ class ActiveRun:
     task: asyncio.Task[None] | None = None
     published_seq: int = -1
     started_monotonic: float = field(default_factory=time.monotonic)
+    checked: bool = False  # reference and first plan checked at POST (the model was ready then)
 
 
 class RunManager:
@@ -140,6 +147,8 @@ class RunManager:
         self._shutting_down = False
         #: where runs stream their recording live (``--rerun-connect``, or the server's rerun web viewer)
         self.live_url: str | None = settings.rerun_connect
+        #: the data directory's usage, quota, free space and retention (backend.storage)
+        self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
     def files(self, run_id: str) -> RunFiles:
         return RunFiles(self.settings.runs_dir / run_id)
@@ -180,17 +189,36 @@ class RunManager:
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
 
+    async def _check_start(self, scenario: Scenario) -> None:
+        """The loop factory's checks of a run's start (they need the radiation model): a reachable
+        reference, and a first plan within this server's time and memory (twin.control.budget)."""
+        await self._check_reference(scenario.reference)
+        check_plan = getattr(self.loop_factory, "check_plan", None)
+        if callable(check_plan):
+            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
+            try:
+                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
+            except ValueError as exc:
+                raise LimitExceeded(f"reference: {exc}") from None
+
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id at once.  While the radiation model warms up the run
-        waits as ``queued`` (its reference is checked when the model is ready: an unreachable one ends it
-        in ``error``); afterwards an unreachable reference is a :class:`LimitExceeded` here."""
+        waits as ``queued`` (its reference and plan size are checked when the model is ready: a refusal
+        ends it in ``error``); afterwards they are a :class:`LimitExceeded` here."""
         self.check_limits(scenario)
-        if self.model_ready():
-            await self._check_reference(scenario.reference)
+        checked = self.model_ready()
+        if checked:
+            await self._check_start(scenario)
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
+        await asyncio.to_thread(self.disk.apply_retention, self._repo, self.settings.runs_dir)
+        need = run_bytes(self.cfg, scenario.duration, self.settings.recording_image_interval_s)
+        need += sum(run_bytes(self.cfg, a.worker.scenario.duration) for a in self._runs.values())  # still to come
+        problem = await asyncio.to_thread(self.disk.room_for, need)
+        if problem is not None:
+            raise InsufficientStorage(problem)
         self._loop = asyncio.get_running_loop()
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
@@ -198,12 +226,13 @@ class RunManager:
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
-                           live_url=self.live_url)
+                           disk=self.disk, live_url=self.live_url)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
             executor=concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"run-{run_id}"),
             wake=asyncio.Event(),
+            checked=checked,
         )
         self._runs[run_id] = run
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
@@ -238,7 +267,8 @@ class RunManager:
         try:
             if not await self._wait_for_model(run):
                 raise _StoppedWhileQueued
-            await self._check_reference(w.scenario.reference)
+            if not run.checked:  # posted during the warm-up: checked now that the model is ready
+                await self._check_start(w.scenario)
             self._set_status(run_id, run, "starting")
             await aio.run_in_executor(run.executor, w.build)
             self._set_status(run_id, run, "running")
@@ -283,6 +313,9 @@ class RunManager:
             final = "interrupted"
             error = "the server shut down during the run"
             raise
+        except PlanCancelled:  # stopped (or shut down) while the first plan was being made
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down during the run" if self._shutting_down else None
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"
@@ -339,8 +372,10 @@ class RunManager:
 
     async def change(self, run_id: str, kind: str,
                      value: Reference | OscillationSpec | list[FaultSpec]) -> dict[str, Any]:
-        """Queue a reference / oscillation / faults change; wait (bounded) until the worker applied it
-        (a re-plan for the first two).
+        """Queue a reference / oscillation / faults change; wait (bounded) until it is in force (``applied``),
+        a later change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in
+        the run's events and its changes).  A change that cannot be planned (or faults a furnace cannot
+        take) raises :class:`ChangeRejected`.
 
         A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
         run = self._active(run_id)

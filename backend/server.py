@@ -8,26 +8,18 @@ answers at once, and runs posted meanwhile wait as ``queued``.
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from backend.app import create_app
 from backend.loop_factory import DefaultLoopFactory
-from backend.settings import DEFAULT_DATA_DIR, Settings
+from backend.settings import DEFAULT_DATA_DIR, Settings, is_loopback
 from twin.config import FurnaceConfig
 from twin.limits import furnace_name
 
 log = logging.getLogger(__name__)
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def serve(
@@ -57,7 +49,12 @@ def serve(
         given["rerun_connect"] = rerun_connect
     if rerun_web_port is not None:
         given["rerun_web_port"] = rerun_web_port
-    settings = Settings(**given)  # type: ignore[arg-type]  # the rest from defaults / environment
+    try:
+        settings = Settings(**given)  # type: ignore[arg-type]  # the rest from defaults / environment
+    except ValidationError as exc:
+        log.error("invalid server settings (FURNACE_TWIN_...): %s", "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()))
+        return 2
     if not is_loopback(host) and not settings.api_token:
         log.error("refusing to listen on %s without an API token: set FURNACE_TWIN_API_TOKEN "
                   "(or keep the default 127.0.0.1)", host)

@@ -24,4 +24,6 @@ def health(manager: ManagerDep, settings: SettingsDep, request: Request) -> Heal
         viser_url=getattr(request.app.state, "viser_url", None),
         rerun_url=getattr(request.app.state, "rerun_url", None),
         auth_required=bool(settings.api_token),
+        reads_need_token=settings.reads_need_token,
+        disk=manager.disk.report(),
     )

@@ -26,3 +26,6 @@ def test_stream_bench_keys(small_cfg) -> None:
     assert r["rss_peak_mb"] >= r["rss_baseline_mb"] > 50  # a server with numpy and casadi loaded
     assert r["rss_growth_mb"] == pytest.approx(r["rss_peak_mb"] - r["rss_baseline_mb"])
     assert r["max_speed_rtf_ratio"] == pytest.approx(r["max_speed_rtf_with_clients"] / r["closed_loop_rtf_bare"])
+    # what holds on any machine, however loaded: no more frames per second than the live run makes samples
+    # (a double-counted frame would exceed it), and no frame before its sample was taken
+    assert r["stream_fps_min"] <= 20.0 + 1e-9 and r["stream_latency_p95_ms"] >= 0.0

@@ -29,7 +29,8 @@ from conftest import fake_factory, wait_status
     ({"target": "TC1", "kind": "stuck"}, "list"),
 ])
 def test_bad_fault_lists_are_refused_with_the_reason(tmp_path, small_cfg, body, needle) -> None:
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=fake_factory())) as c:
+    app = create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=fake_factory())
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0}).json()["id"]
         r = c.put(f"/api/runs/{run_id}/faults", json=body)
         assert r.status_code == 422 and needle in r.text, r.text
@@ -45,7 +46,8 @@ def test_bad_fault_lists_are_refused_with_the_reason(tmp_path, small_cfg, body, 
 def test_faults_of_a_real_run_from_scenario_and_put(tmp_path, small_cfg) -> None:
     scenario = {"duration": 30.0, "speed": 5.0, "reference": {"setpoint": 800.0, "t_E": 10.0},
                 "faults": [{"at": 3.0, "target": "TC1", "kind": "dropout"}]}
-    with TestClient(create_app(Settings(data_dir=tmp_path, change_timeout_s=60.0), small_cfg)) as c:
+    app = create_app(Settings(data_dir=tmp_path, change_timeout_s=60.0), small_cfg)
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         r = c.post("/api/runs", json=scenario)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]

@@ -60,7 +60,8 @@ def receiver(tmp_path, isolated_home):
 
 def test_a_run_streams_live_to_a_rerun_receiver(tmp_path, small_cfg, receiver) -> None:
     url, out, proc, env = receiver
-    with TestClient(create_app(Settings(data_dir=tmp_path / "data", rerun_connect=url), small_cfg)) as c:
+    app = create_app(Settings(data_dir=tmp_path / "data", rerun_connect=url), small_cfg)
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json=SCENARIO).json()["id"]
         body = wait_status(c, run_id, {"finished", "error"})
         assert body["status"] == "finished", body["error"]
@@ -86,7 +87,8 @@ def test_a_run_streams_live_to_a_rerun_receiver(tmp_path, small_cfg, receiver) -
 
 def test_an_unreachable_rerun_endpoint_leaves_the_run_alone(tmp_path, small_cfg) -> None:
     url = grpc_url(free_port())  # nothing listens there
-    with TestClient(create_app(Settings(data_dir=tmp_path, rerun_connect=url), small_cfg)) as c:
+    app = create_app(Settings(data_dir=tmp_path, rerun_connect=url), small_cfg)
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         t0 = time.monotonic()
         r = c.post("/api/runs", json={"duration": 2.0, "reference": {"setpoint": 700.0, "t_E": 3.0}})
         assert r.status_code == 201, r.text

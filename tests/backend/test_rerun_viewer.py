@@ -52,7 +52,7 @@ def test_viewer_on_loopback_with_memory_limits(tmp_path, isolated_home) -> None:
 def test_runs_link_to_the_viewer(tmp_path, small_cfg, isolated_home) -> None:
     s = Settings(data_dir=tmp_path / "data", rerun_web_port=free_port(), rerun_grpc_port=free_port())
     app = create_app(s, small_cfg, loop_factory=fake_factory(), rerun=True)
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         health = c.get("/api/health").json()
         assert health["rerun_url"] == f"http://127.0.0.1:{s.rerun_web_port}/"
         run_id = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0}).json()["id"]

@@ -46,7 +46,8 @@ def _health(c) -> dict:
 
 
 def test_a_post_during_warm_up_is_queued_and_starts_when_ready(tmp_path, small_cfg, gated_radiation) -> None:
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())) as c:
+    app = create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         end = time.monotonic() + 30
         while _health(c)["radiation_progress"]["done"] < 3 and time.monotonic() < end:
             time.sleep(0.02)
@@ -80,7 +81,8 @@ def test_a_post_during_warm_up_is_queued_and_starts_when_ready(tmp_path, small_c
 
 
 def test_a_run_stopped_while_queued_ends_stopped(tmp_path, small_cfg, gated_radiation) -> None:
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())) as c:
+    app = create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json={"duration": 1.0}).json()["id"]
         assert c.post(f"/api/runs/{run_id}/stop").status_code == 202
         body = wait_status(c, run_id, {"stopped", "error", "finished"}, timeout=30)

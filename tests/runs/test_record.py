@@ -42,3 +42,18 @@ def test_metrics_unchanged_within_the_windows() -> None:
         full.append(_snap(j))
         thin.append(_snap(j))
     np.testing.assert_equal(compute_metrics(full.arrays()), compute_metrics(thin.arrays()))
+
+
+def test_tails_of_a_thinned_record_add_up_to_its_arrays() -> None:
+    """The parts a running server appends (twin.runs.series_store) hold each kept field once, in order."""
+    rec = _record(field_every=10, full_rate_until=4.0)
+    parts = []
+    start = 0
+    for j in range(101):
+        rec.append(_snap(j))
+        if j % 7 == 6 or j == 100:  # a flush now and then
+            parts.append(rec.tail(start))
+            start = len(rec)
+    whole = rec.arrays()
+    for k in ("t", "T_mean_hat", "t_field", "field_hat", "field_true"):
+        np.testing.assert_array_equal(np.concatenate([p[k] for p in parts]), whole[k])

@@ -7,7 +7,9 @@
 - :func:`faulty_model`: the controller's model with each lamp group scaled by the fraction of its power it
   is believed to deliver (a failed group's column of B is 0: the OCP holds it at 0, the LQG leaves it);
 - :func:`reach_note`: what the groups left can hold (fillet mean at full power, the model's steady state)
-  against the reference, for the event of the re-plan.
+  against the reference, for the event of the re-plan;
+- :class:`FaultRideThrough`: the loop's methods for it (injecting faults into its furnace, reporting the
+  detector's decisions, re-planning when a lamp group's state changed).
 
 Example
 -------
@@ -18,12 +20,20 @@ Example
 from __future__ import annotations
 
 import dataclasses
+import logging
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
+from twin.furnace.interface import FaultInjectable, Furnace
+from twin.scenario import FaultSpec, OscillationSpec
+
+log = logging.getLogger(__name__)
 
 #: with the averaged model of an oscillating specimen the innovation tests wait this long (s) after the
 #: reference's transition (docs/faults.md: false decisions at 52-64 s of every oscillating heat-up)
@@ -64,3 +74,56 @@ def reach_note(cfg: FurnaceConfig, model: Any, lamp_gains: ArrayLike, T_end: flo
         return f"with {lost} the groups left hold at most {top:.0f} K (fillet mean): the reference's {T_end:.0f} K " \
                "is out of reach"
     return f"with {lost} the groups left hold up to {top:.0f} K: the reference ({T_end:.0f} K) stays reachable"
+
+
+class FaultRideThrough:
+    """The closed loop's part of the fault handling (``twin.runs.loop.ClosedLoop`` mixes it in)."""
+
+    furnace: Furnace
+    detector: Any  # twin.estimation.fault_detection.FaultDetector
+    j: int
+    t_s: float
+    _lock: threading.Lock
+    _events: list[str]
+    _oscillation: OscillationSpec
+    _ref_fn: Callable[[Any], Any]
+    _lamp_gains: Any
+    _lamps_change: str
+    _request: Callable[[str, str], Future[float]]
+
+    def _motion_for_detection(self, t: float) -> None:
+        """The detector's innovation tests while the estimator's model explains its innovations
+        (:func:`innovation_tests_wanted`)."""
+        osc = self._oscillation.enabled
+        on = innovation_tests_wanted(osc, t, float(getattr(self._ref_fn, "t_end", 0.0)))
+        if on != self.detector.innovation_tests:
+            self._events.append(detection_mode_event(on, osc))
+        self.detector.set_innovation_tests(on)
+
+    def _on_detections(self, t: float, detections: Sequence[Any]) -> None:
+        """Report the detector's decisions; a lamp group's new state re-plans the feedforward without it."""
+        for d in detections:
+            self._events.append(f"fault detected: {d.text}")
+        lamps = [d for d in detections if d.target not in ("TC1", "TC2", "TC3", "TC4")]
+        if lamps:
+            self._lamp_gains = self.detector.lamp_gains.copy()
+            what = ", ".join(f"{d.target} {d.kind}" for d in lamps)
+            self._lamps_change = f"lamp group {what}"
+            try:
+                self._request("lamps", f"lamp group {what} at t = {t:.1f} s")
+            except Exception:  # inline planning failed: the old plan goes on (the loop's event says so)
+                log.exception("re-planning for lamp group %s failed", what)
+
+    def set_faults(self, faults: Sequence[FaultSpec]) -> None:
+        """Inject ``faults`` into the furnace from the next sample on (``at`` counts from then; empty clears).
+
+        Raises ValueError for a furnace that faults cannot be injected into (a real one).
+        """
+        if not isinstance(self.furnace, FaultInjectable):
+            raise ValueError(f"faults can be injected only into a simulated furnace, not a {self.furnace.kind} one")
+        with self._lock:
+            self.furnace.set_faults(faults, self.j * self.t_s)
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        """The faults injected into the furnace (``at`` in run time); none for a real furnace."""
+        return self.furnace.faults_in_force() if isinstance(self.furnace, FaultInjectable) else []
