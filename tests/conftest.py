@@ -35,3 +35,12 @@ def small_radiation(radiation_cache):
     from twin.radiation import radiation_model
 
     return radiation_model(small_config(), cache_dir=radiation_cache)
+
+
+@pytest.fixture(scope="session")
+def small_truth_radiation(radiation_cache):
+    """The simulated furnace's own table of ``small_config()`` (``[truth.radiation]``, symmetric trace)."""
+    from twin.config import small_config
+    from twin.furnace.simulated.truth import truth_radiation
+
+    return truth_radiation(small_config(), cache_dir=radiation_cache)

@@ -39,7 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--viser-port", type=int, default=8080)
     s.add_argument("--data-dir", default=None, help="runs database and recordings (default ./furnace-data)")
 
-    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached)")
+    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached): the twin's "
+                       "model's and the simulated furnace's own")
     s.add_argument("--force", action="store_true", help="recompute even if cached")
 
     s = sub.add_parser("simulate", help="open-loop plant run: timeseries.npz and PNG figures")
@@ -99,9 +100,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir)
         if args.command == "precompute":
+            from twin.furnace.simulated.truth import precompute_truth
             from twin.radiation.cache import precompute_command
 
-            return precompute_command(cfg, force=args.force)
+            status = precompute_command(cfg, force=args.force)
+            precompute_truth(cfg, force=args.force)  # the simulated furnace's own table
+            return status
         if args.command == "simulate":
             from twin.runs.open_loop import simulate_command
 

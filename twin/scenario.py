@@ -101,6 +101,11 @@ class Scenario(_Model):
     mismatch: Mismatch = Field(default_factory=Mismatch)
     tc_noise: float = Field(1.0, ge=0.0, le=50.0, description="TC noise standard deviation, K")
     seed: int = Field(0, ge=0, le=2**31 - 1)
+    truth: Literal["independent", "shared"] = Field(
+        "independent",
+        description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
+        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
+    )
 
     @field_validator("tc4")
     @classmethod
