@@ -1,4 +1,5 @@
-"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model."""
+"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (the
+twin's and the simulated furnace's own, each loaded once per furnace)."""
 
 from __future__ import annotations
 
@@ -14,11 +15,12 @@ log = logging.getLogger(__name__)
 
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (loaded once, lazily)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
+        self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
 
     def radiation(self, cfg: FurnaceConfig) -> Any:
@@ -29,6 +31,16 @@ class DefaultLoopFactory:
             if key not in self._radiation:
                 self._radiation[key] = radiation_model(cfg)
             return self._radiation[key]
+
+    def truth_radiation(self, cfg: FurnaceConfig) -> Any:
+        """The simulated furnace's own table (``[truth.radiation]``), for runs whose truth is independent."""
+        from twin.furnace.simulated.truth import truth_radiation
+
+        key = cfg.digest()
+        with self._lock:
+            if key not in self._truth_radiation:
+                self._truth_radiation[key] = truth_radiation(cfg)
+            return self._truth_radiation[key]
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -58,8 +70,12 @@ class DefaultLoopFactory:
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+        from twin.furnace.simulated import SimulatedFurnace
         from twin.runs.loop import ClosedLoop
 
+        rad = self.radiation(cfg)
+        own = self.truth_radiation(cfg) if scenario.truth == "independent" else None
+        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg), background=True)
+        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True)
         return loop

@@ -63,13 +63,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/run")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
-    s = sub.add_parser("campaign", help="the paper's six experiments and a comparison table")
+    s = sub.add_parser("campaign", help="the paper's six experiments, several seeds each, and a comparison table")
     s.add_argument("--out", default="out/campaign")
     s.add_argument("--json", action="store_true")
     s.add_argument("--t-e", type=float, default=None, help="shorten the transition time (s) for a quick look")
+    s.add_argument("--seeds", type=int, default=5, help="seeds per experiment (0 .. N-1; TC noise and biases)")
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant, to compare")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+    for sp in sub.choices.values():  # --config also after the command (furnace-twin campaign --config banded)
+        sp.add_argument("--config", default=argparse.SUPPRESS, help="as before the command")
     return p
 
 

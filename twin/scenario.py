@@ -175,7 +175,7 @@ class Scenario(_Model):
     tc_noise: float = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
     seed: int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
-    truth: Literal["independent", "shared"] = Field(
+    truth: lim.TruthKind = Field(
         lim.TRUTH_DEFAULT,
         description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
         "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
