@@ -54,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=float, default=None, help="s (default 18)")
     s.add_argument("--tc4", type=_rel_point, default=(0.5, 0.5))
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant")
     s.add_argument("--out", default="out/simulate")
 
     s = sub.add_parser("run", help="one headless closed-loop run")
