@@ -82,17 +82,32 @@ def _mode(e: dict[str, Any]) -> str:
     return "oscillating" if e["oscillation"] else "fixed"
 
 
+#: the true field's metrics are held to the bound of their estimated counterpart: the paper's bounds are
+#: about the specimen, which only a simulation can see
+TRUE_BOUND_OF = {"true_mean_error_steady_max": "mean_error_steady_max",
+                 "true_inhomogeneity_steady": "inhomogeneity_steady"}
+
+
+def bound(key: str, mode: str) -> float | None:
+    """The paper's value a metric is held to in a specimen mode ("fixed" / "oscillating"), if any."""
+    return PAPER[mode].get(key, PAPER[mode].get(TRUE_BOUND_OF.get(key, "")))
+
+
 def campaign_table(experiments: list[dict[str, Any]]) -> str:
     """Markdown table: each metric, the paper's value and the twin's per experiment (worst over its seeds);
-    a value above the paper's for its specimen mode is marked ✗."""
+    a value above the paper's for its specimen mode is marked ✗ (the true_* rows against the bound of the
+    estimated quantity, shown in parentheses)."""
     head = "| metric | paper fixed | paper osc. | " + " | ".join(e["name"] for e in experiments) + " |"
     sep = "|" + "---|" * (3 + len(experiments))
     rows = [head, sep]
     for key in METRIC_KEYS:
-        cells = [key, _fmt(PAPER["fixed"].get(key)), _fmt(PAPER["oscillating"].get(key))]
+        paper = [_fmt(bound(key, m)) for m in ("fixed", "oscillating")]
+        if key in TRUE_BOUND_OF:
+            paper = [f"({p})" for p in paper]
+        cells = [key, *paper]
         for e in experiments:
-            v, bound = e["metrics"].get(key), PAPER[_mode(e)].get(key)
-            fails = v is not None and bound is not None and np.isfinite(v) and v > bound
+            v, b = e["metrics"].get(key), bound(key, _mode(e))
+            fails = v is not None and b is not None and np.isfinite(v) and v > b
             cells.append(_fmt(v) + (" ✗" if fails else ""))
         rows.append("| " + " | ".join(cells) + " |")
     return "\n".join(rows)
@@ -215,7 +230,7 @@ def campaign_report(result: dict[str, Any], t_E: float) -> str:
         "# Campaign: the paper's numbers beside the twin's\n\n"
         f"Truth: {result['truth']}; seeds 0..{n - 1}; t_E = {t_E:g} s.  Relative to T_ref(t_E).  Windows: "
         "transient 0..t_E, steady 1.5..2 t_E (product.md).\n\n"
-        f"## Worst over the {n} seeds (✗: above the paper's value for that specimen mode)\n\n"
+        f"## Worst over the {n} seed{'s' if n != 1 else ''} (✗: above the paper's value for that specimen mode)\n\n"
         + campaign_table(ex)
         + "\n\n## Range over the seeds\n\n"
         + seeds_table(ex)
