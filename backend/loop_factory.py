@@ -9,6 +9,7 @@ from typing import Any
 
 from backend.run_worker import LoopLike
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -23,24 +24,31 @@ class DefaultLoopFactory:
         self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
 
-    def radiation(self, cfg: FurnaceConfig) -> Any:
+    def _shared(self, store: dict[str, Any], cfg: FurnaceConfig, load: Any, budget: PlanBudget | None) -> Any:
+        """``store[cfg]``, loaded (or ray-traced) once by ``load(cfg)``; a run waiting for another caller's
+        computation stops waiting when its ``budget`` is cancelled (Stop while starting)."""
+        key = cfg.digest()
+        while not self._lock.acquire(timeout=0.1):
+            if budget is not None and budget.cancelled:
+                raise PlanCancelled("stopped while the radiation model was being computed")
+        try:
+            if key not in store:
+                store[key] = load(cfg)
+            return store[key]
+        finally:
+            self._lock.release()
+
+    def radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
+        """The twin's radiation model of the furnace (see :meth:`_shared`)."""
         from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
 
-        key = cfg.digest()
-        with self._lock:
-            if key not in self._radiation:
-                self._radiation[key] = radiation_model(cfg)
-            return self._radiation[key]
+        return self._shared(self._radiation, cfg, radiation_model, budget)
 
-    def truth_radiation(self, cfg: FurnaceConfig) -> Any:
+    def truth_radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
         """The simulated furnace's own table (``[truth.radiation]``), for runs whose truth is independent."""
         from twin.furnace.simulated.truth import truth_radiation
 
-        key = cfg.digest()
-        with self._lock:
-            if key not in self._truth_radiation:
-                self._truth_radiation[key] = truth_radiation(cfg)
-            return self._truth_radiation[key]
+        return self._shared(self._truth_radiation, cfg, truth_radiation, budget)
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -69,13 +77,25 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+    def check_plan(self, cfg: FurnaceConfig, scenario: Scenario, budget: PlanBudget) -> None:
+        """Raise ``twin.control.budget.PlanTooLarge`` (a ``ValueError``) if the run's first plan is estimated
+        beyond ``budget``'s time or memory, so ``POST /api/runs`` answers 422 that says why."""
+        from twin.control.reference import reference_trajectory
+        from twin.control.replan import plan_estimate
+        from twin.model.discrete import discrete_model
+
+        model = discrete_model(cfg, self.radiation(cfg), None)  # same size and cost as the averaged one
+        T0 = float(cfg.specimen.initial_temperature)
+        ref = reference_trajectory(scenario.reference, T0)
+        plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
+
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
         from twin.furnace.simulated import SimulatedFurnace
         from twin.runs.loop import ClosedLoop
 
-        rad = self.radiation(cfg)
-        own = self.truth_radiation(cfg) if scenario.truth == "independent" else None
-        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True)
+        rad = self.radiation(cfg, budget)
+        own = self.truth_radiation(cfg, budget) if scenario.truth == "independent" else None
+        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
+        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True, budget=budget)
         return loop

@@ -24,7 +24,7 @@ import pytest
 
 from twin.config import load_config, small_config
 from twin.runs.campaign import PAPER, TC4_POSITIONS, campaign_scenarios, campaign_table, run_campaign, worst
-from twin.runs.metrics import METRIC_KEYS
+from twin.runs.metrics import METRIC_KEYS, compute_metrics
 from twin.runs.model_error import MODEL_ERROR_KEYS
 
 EXPECTED = Path(__file__).with_name("campaign_expected.json")
@@ -64,24 +64,45 @@ def campaign(tmp_path_factory, small_radiation, small_truth_radiation):
 
 def test_reduced_campaign_writes_every_seed(campaign):
     out, result = campaign
+    cfg = small_config()
     assert result["paper"] == PAPER and result["truth"] == "independent" and result["seeds"] == [0, 1]
     names = [e["name"] for e in result["experiments"]]
     assert len(names) == 6 and len(set(names)) == 6
+    amplitude = 3 * cfg.lamps.horizontal.pitch  # section 5.2: 3 L_h (0.048 m, inside eta_max)
     for e in result["experiments"]:
         assert [s["seed"] for s in e["seeds"]] == [0, 1]
         for s in e["seeds"]:
             folder = out / e["name"] / f"seed_{s['seed']}"
             assert s["out"] == str(folder)
-            assert json.loads((folder / "metrics.json").read_text()) == pytest.approx(s["metrics"], nan_ok=True)
-            with np.load(folder / "timeseries.npz") as ts:
-                assert ts["t"][-1] == 2 * T_E
-                assert bool(np.any(ts["eta"] != 0)) == e["oscillation"]
-                assert np.allclose(ts["tc_positions"][3] / [0.4, 0.2], e["tc4"])
-                sc = json.loads(str(ts["scenario"]))
-                assert sc["seed"] == s["seed"] and sc["truth"] == "independent"
+            saved = json.loads((folder / "metrics.json").read_text())
+            assert saved == pytest.approx(s["metrics"], nan_ok=True)
+            with np.load(folder / "timeseries.npz") as npz:
+                ts = dict(npz)
+            assert ts["t"][-1] == 2 * T_E
+            # the reported figures are those of the stored run (recomputed from its time series)
+            again = compute_metrics(ts)
+            for k, v in saved.items():
+                assert again[k] == pytest.approx(v, rel=1e-12, abs=1e-15), (e["name"], k)
+            # the oscillating runs move by 3 L_h sin(2 pi t / (0.15 t_E)); sampled at 0.1 s (1/45 of the
+            # 4.5 s period) the largest |eta| seen is within cos(2 pi 0.05 / 4.5) = 99.8 % of the amplitude
+            if e["oscillation"]:
+                assert 0.997 * amplitude <= np.abs(ts["eta"]).max() <= amplitude * (1 + 1e-12)
+            else:
+                assert not np.any(ts["eta"])
+            assert np.allclose(ts["tc_positions"][3] / [cfg.specimen.length, cfg.specimen.width], e["tc4"])
+            sc = json.loads(str(ts["scenario"]))
+            assert sc["seed"] == s["seed"] and sc["truth"] == "independent"
     assert json.loads((out / "campaign.json").read_text())["experiments"] == result["experiments"]
     report = (out / "campaign.md").read_text()
-    assert "paper fixed" in report and "inhomogeneity_steady" in report and "4.00 %" in report
+    # the table puts each experiment's worst figure, in percent with two decimals, in its metric's row
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+            for line in report.split("## Range")[0].splitlines() if line.startswith("| ")}
+    for key in METRIC_KEYS:
+        for cell, e in zip(rows[key][2:], result["experiments"], strict=True):
+            v = e["metrics"][key]
+            assert cell.removesuffix(" ✗") == ("n/a" if v is None else f"{100 * v:.2f} %"), (key, e["name"])
+    assert rows["inhomogeneity_steady"][:2] == ["4.00 %", "2.00 %"]  # the paper's column (section 5.3)
+    assert rows["true_inhomogeneity_steady"][:2] == ["(4.00 %)", "(2.00 %)"]  # held to the estimate's bound
     assert "Range over the seeds" in report and "model_point_error_steady_max" in report
     assert (out / "homogeneity.png").stat().st_size > 10_000
 
