@@ -34,6 +34,7 @@ function scenarioFromForm(form) {
     mismatch: { emissivity: num("m_eps"), alpha: num("m_alpha"), lamp_efficiency: num("m_lamp") },
     tc_noise: num("tc_noise"),
     seed: Math.trunc(num("seed")),
+    truth: v("truth"),
   };
 }
 

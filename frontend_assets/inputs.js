@@ -38,6 +38,8 @@ export function applyLimits(furnace) {
     if (first !== undefined) el.value = String(Math.min(Math.max(first, lo), r.max));
     el.title = `${lo}\u2026${r.max}${r.unit ? ` ${r.unit}` : ""}`;
   }
+  const truth = document.querySelector("#start-form [name=truth]");
+  truth.replaceChildren(...limits.truth.choices.map((c) => new Option(c, c, false, c === limits.truth.default)));
   const speed = document.querySelector("#start-form [name=speed]");
   speed.value = String(limits.speed.default);
   speed.title = `'max' or a real-time factor from ${limits.speed.min} to ${limits.speed.max}`;

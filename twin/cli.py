@@ -40,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--viser-port", type=int, default=8080)
     s.add_argument("--data-dir", default=None, help="runs database and recordings (default ./furnace-data)")
 
-    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached)")
+    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached): the twin's "
+                       "model's and the simulated furnace's own")
     s.add_argument("--force", action="store_true", help="recompute even if cached")
 
     s = sub.add_parser("simulate", help="open-loop plant run: timeseries.npz and PNG figures")
@@ -53,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=float, default=None, help="s (default 18)")
     s.add_argument("--tc4", type=_rel_point, default=(0.5, 0.5))
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant")
     s.add_argument("--out", default="out/simulate")
 
     s = sub.add_parser("run", help="one headless closed-loop run")
@@ -62,13 +65,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/run")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
-    s = sub.add_parser("campaign", help="the paper's six experiments and a comparison table")
+    s = sub.add_parser("campaign", help="the paper's six experiments, several seeds each, and a comparison table")
     s.add_argument("--out", default="out/campaign")
     s.add_argument("--json", action="store_true")
     s.add_argument("--t-e", type=float, default=None, help="shorten the transition time (s) for a quick look")
+    s.add_argument("--seeds", type=int, default=5, help="seeds per experiment (0 .. N-1; TC noise and biases)")
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant, to compare")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+    for sp in sub.choices.values():  # --config also after the command (furnace-twin campaign --config banded)
+        sp.add_argument("--config", default=argparse.SUPPRESS, help="as before the command")
     return p
 
 
@@ -102,9 +110,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir,
                          furnace=args.config or os.environ.get(CONFIG_ENV_VAR))
         if args.command == "precompute":
+            from twin.furnace.simulated.truth import precompute_truth
             from twin.radiation.cache import precompute_command
 
-            return precompute_command(cfg, force=args.force)
+            status = precompute_command(cfg, force=args.force)
+            precompute_truth(cfg, force=args.force)  # the simulated furnace's own table
+            return status
         if args.command == "simulate":
             from twin.runs.open_loop import simulate_command
 

@@ -30,7 +30,7 @@ import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from twin.config import DEFAULT_CONFIG_PATH, SHIPPED_FURNACES, FurnaceConfig, load_config
 
@@ -92,6 +92,10 @@ MISMATCH_EMISSIVITY = Range(-0.5, 0.1, 0.0)
 MISMATCH_ALPHA = Range(-0.9, 2.0, 0.0)
 MISMATCH_LAMP_EFFICIENCY = Range(-0.5, 0.5, 0.0)
 SEED = Range(0, 2**31 - 1, 0)
+#: the simulated furnace's truth (twin.scenario.Scenario.truth): its own, or the model's tables and ideal sensors
+TruthKind = Literal["independent", "shared"]
+TRUTH_CHOICES: tuple[TruthKind, ...] = ("independent", "shared")
+TRUTH_DEFAULT: TruthKind = "independent"
 
 
 @dataclass(frozen=True)
@@ -142,6 +146,7 @@ class ScenarioLimits:
                          "lamp_efficiency": self.mismatch_lamp_efficiency.to_json()},
             "tc_noise": self.tc_noise.to_json(),
             "seed": self.seed.to_json(),
+            "truth": {"choices": list(TRUTH_CHOICES), "default": TRUTH_DEFAULT},
         }
 
 

@@ -183,6 +183,11 @@ class Scenario(_Model):
     tc_noise: Num = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
+    truth: lim.TruthKind = Field(
+        lim.TRUTH_DEFAULT,
+        description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
+        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
+    )
 
     @model_validator(mode="before")
     @classmethod

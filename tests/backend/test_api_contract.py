@@ -129,6 +129,7 @@ def test_422s_name_the_field(tmp_path, small_cfg) -> None:
             ({"bogus": 1}, "bogus"),
             ({"duration": 200.0}, "duration"),  # over this server's limit of 100 s
             ({"speed": 50.0, "duration": 10.0}, "speed"),  # over this server's limit of 10
+            ({"truth": "model"}, "truth"),  # "independent" or "shared"
         ]
         for body, field in cases:
             r = c.post("/api/runs", json=body)

@@ -241,6 +241,11 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
         assert bounds == [["0", "0.03", "0.03"], ["1", "900", "240"]]
         assert _js(page, "document.getElementById('live-amplitude').max") == "0.03"
         assert "furnace low_stroke · η ≤ 30 mm" in _text(page, "header")
+        # the truth choice: independent (the furnace file's [truth]) by default, shared to compare
+        assert _js(page, "[...document.querySelector('#start-form [name=truth]').options].map((o) => o.value)") \
+            == ["independent", "shared"]
+        assert _js(page, "document.querySelector('#start-form [name=truth]').value") == "independent"
+        page.select_option("#start-form [name=truth]", "shared")
         page.check("input[name=osc]")
         page.fill("input[name=speed]", "1")
         page.click("#start-btn")
@@ -248,6 +253,7 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
         run_id = _js(page, "state.runId")
         run = httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()
         assert run["oscillation"] == {"enabled": True, "amplitude": 0.03, "period": 18.0}
+        assert run["scenario"]["truth"] == "shared"
         _wait_text(page, "#osc-btn", "Oscillation off")  # the run oscillates: the server says so
         page.fill("#live-amplitude", "0.04")
         page.click("#osc-btn")
