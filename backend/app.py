@@ -2,11 +2,13 @@
 
 >>> from backend.app import create_app
 >>> from backend.settings import Settings
+from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 >>> app = create_app(Settings(data_dir="/tmp/furnace-doc"))  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -17,10 +19,11 @@ from fastapi.responses import FileResponse, JSONResponse
 
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import files, health, runs, stream
+from backend.routes import files, health, runs, stream, studies
 from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
 from backend.run_worker import ChangeRejected, LoopFactory
 from backend.settings import Settings
+from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 from twin.config import FurnaceConfig, load_config
 
 log = logging.getLogger(__name__)
@@ -65,6 +68,7 @@ def create_app(
     *,
     loop_factory: LoopFactory | None = None,
     viser: bool = False,
+    study_runner: StudyRunner | None = None,
 ) -> FastAPI:
     """Build the app; the lifespan opens the database, marks crashed runs interrupted, and
     (with ``viser=True``) starts the 3D view on ``settings.viser_port``."""
@@ -78,11 +82,10 @@ def create_app(
         recover_interrupted(repo, settings.runs_dir)
         manager = RunManager(settings, cfg, repo, loop_factory)
         app.state.settings, app.state.repo, app.state.manager = settings, repo, manager
+        app.state.studies = StudyManager(settings, cfg, study_runner)
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
-            import asyncio
-
             from backend.viser_view import FurnaceView
 
             manager.event_loop = asyncio.get_running_loop()
@@ -95,6 +98,7 @@ def create_app(
             yield
         finally:
             await manager.shutdown()
+            await asyncio.to_thread(app.state.studies.shutdown)
             if scene is not None:
                 scene.stop()
             repo.close()
@@ -111,11 +115,15 @@ def create_app(
     app.include_router(runs.router)
     app.include_router(files.router)
     app.include_router(stream.router)
+    app.include_router(studies.router)
     app.add_exception_handler(RunNotFound, _error(status.HTTP_404_NOT_FOUND))
     app.add_exception_handler(RunNotActive, _error(status.HTTP_409_CONFLICT))
     app.add_exception_handler(TooManyRuns, _error(status.HTTP_429_TOO_MANY_REQUESTS))
     app.add_exception_handler(LimitExceeded, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
     app.add_exception_handler(ChangeRejected, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
+    app.add_exception_handler(StudyNotFound, _error(status.HTTP_404_NOT_FOUND))
+    app.add_exception_handler(StudyRejected, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
+    app.add_exception_handler(StudyConflict, _error(status.HTTP_409_CONFLICT))
 
     @app.get("/", include_in_schema=False)
     def dashboard() -> FileResponse:

@@ -136,6 +136,13 @@ def test_monte_carlo_values_out_of_a_fields_range_are_refused(cfg):
         expand(spec, cfg)
 
 
+def test_a_truncation_far_in_the_tail_is_a_study_error(cfg):
+    spec = parse_study({"monte_carlo": {"n": 5, "mismatch.alpha": {"dist": "normal", "std": 0.01, "low": 0.5,
+                                                                   "high": 0.6}}})
+    with pytest.raises(StudyError, match="far in the tail"):
+        expand(spec, cfg)
+
+
 def test_study_file_toml(tmp_path):
     f = tmp_path / "s.toml"
     f.write_text('furnace = "banded"\n[base]\nduration = 60.0\n[grid]\n"oscillation.period" = [6.0, 12.0]\n'

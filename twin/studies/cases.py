@@ -66,7 +66,10 @@ def mc_samples(mc: MonteCarlo | None) -> list[dict[str, Any]]:
         return [{}]
     columns: dict[str, list[Any]] = {}
     for path, dist in mc.fields.items():
-        columns[path] = dist.sample(np.random.default_rng([mc.seed, zlib.crc32(path.encode())]), mc.n)
+        try:
+            columns[path] = dist.sample(np.random.default_rng([mc.seed, zlib.crc32(path.encode())]), mc.n)
+        except ValueError as exc:  # e.g. a truncated normal whose bounds lie far in the tail
+            raise StudyError(f"monte_carlo {path!r}: {exc}") from None
     if mc.seeds == "per_sample":
         rng = np.random.default_rng([mc.seed, zlib.crc32(b"seed")])
         columns["seed"] = [int(s) for s in rng.integers(0, 2**31 - 1, mc.n)]
