@@ -19,26 +19,42 @@ FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps fr
 
 
 class SnapshotLike(Protocol):
-    """What the backend reads from ``twin.runs.loop.Snapshot`` (docs/interfaces.md)."""
+    """What the backend reads from ``twin.runs.record.Snapshot`` (docs/interfaces.md); read-only."""
 
-    t: float
-    eta: float
-    T_ref: float
-    T_mean_hat: float
-    field_hat: Any
-    field_true: Any
-    tc: Any
-    tc_hat: Any
-    u: Any
-    u_ff: Any
-    inhomogeneity: float
-    true_mean: float
-    true_inhomogeneity: float
-    events: Any
+    @property
+    def t(self) -> float: ...
+    @property
+    def eta(self) -> float: ...
+    @property
+    def T_ref(self) -> float: ...
+    @property
+    def T_mean_hat(self) -> float: ...
+    @property
+    def field_hat(self) -> Any: ...
+    @property
+    def field_true(self) -> Any: ...  # None for a furnace without a true field
+    @property
+    def tc(self) -> Any: ...
+    @property
+    def tc_hat(self) -> Any: ...
+    @property
+    def u(self) -> Any: ...
+    @property
+    def u_ff(self) -> Any: ...
+    @property
+    def inhomogeneity(self) -> float: ...
+    @property
+    def true_mean(self) -> float | None: ...
+    @property
+    def true_inhomogeneity(self) -> float | None: ...
+    @property
+    def events(self) -> Any: ...
 
 
 def finite_or_none(x: Any) -> float | None:
-    """A JSON-safe float: NaN and inf (e.g. a gated or missing TC) become ``None``."""
+    """A JSON-safe float: NaN, inf (e.g. a gated or missing TC) and ``None`` (no truth) become ``None``."""
+    if x is None:
+        return None
     v = float(x)
     return v if math.isfinite(v) else None
 

@@ -63,6 +63,11 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
     )
 
 
+def _float(x: float | None) -> float:
+    """A snapshot value that a furnace without truth leaves ``None``, as NaN (a gap in the series)."""
+    return float("nan") if x is None else float(x)
+
+
 class RecordingSink:
     """Collects snapshots of one run and writes them to ``path`` (an ``.rrd`` file)."""
 
@@ -127,8 +132,8 @@ class RecordingSink:
             return
         self._rows.append({
             "t": float(s.t), "eta": float(s.eta), "T_ref": float(s.T_ref), "T_mean_hat": float(s.T_mean_hat),
-            "true_mean": float(s.true_mean), "inh": float(s.inhomogeneity),
-            "inh_true": float(s.true_inhomogeneity),
+            "true_mean": _float(s.true_mean), "inh": float(s.inhomogeneity),
+            "inh_true": _float(s.true_inhomogeneity),
             "tc": np.asarray(s.tc, dtype=float), "tc_hat": np.asarray(s.tc_hat, dtype=float),
             "u": np.asarray(s.u, dtype=float), "u_ff": np.asarray(s.u_ff, dtype=float),
         })
@@ -136,6 +141,8 @@ class RecordingSink:
             self._next_image_t = float(s.t) + self.image_interval
             self.rec.set_time(TIMELINE, duration=float(s.t))
             for name, field in (("estimated", s.field_hat), ("true", s.field_true)):
+                if field is None:  # a furnace without a true field
+                    continue
                 self.rec.log(f"field/{name}", rr.DepthImage(
                     np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
                     depth_range=list(self.temperature_range)))

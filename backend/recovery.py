@@ -7,12 +7,11 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
-
 from backend.frames import json_safe
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
 from twin.runs.metrics import compute_metrics
+from twin.runs.record import load_arrays
 
 log = logging.getLogger(__name__)
 
@@ -25,8 +24,7 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
         if not files.timeseries.is_file():
             continue
         try:
-            with np.load(files.timeseries, allow_pickle=False) as z:
-                metrics = json_safe(compute_metrics({k: z[k] for k in z.files}))
+            metrics = json_safe(compute_metrics(load_arrays(files.timeseries)))
         except Exception as exc:  # a file from an older layout: keep the run, say why
             log.warning("run %s: no metrics from %s: %s", run_id, files.timeseries, exc)
             continue

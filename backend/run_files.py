@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.frames import json_safe
-from twin.runs.loop import save_timeseries
+from twin.runs.record import save_arrays
 
 RECORDING = "recording.rrd"
 TIMESERIES = "timeseries.npz"
@@ -54,4 +54,4 @@ def write_json_atomic(path: Path, obj: Any) -> None:
 
 def write_npz_atomic(path: Path, arrays: Mapping[str, Any]) -> None:
     """The run's time series, atomically and uncompressed (it is rewritten every few seconds)."""
-    save_timeseries(path, arrays, compress=False)
+    save_arrays(path, arrays, compress=False)

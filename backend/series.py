@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from backend.frames import json_safe
-from twin.runs.metrics import fillet_mask, sup_norm
+from twin.physics.fillet import Fillet
+from twin.runs.record import load_arrays
 
 SCALARS = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 
@@ -28,18 +29,18 @@ def _pick(n: int, max_points: int) -> np.ndarray:
 
 def load_series(path: Path, max_points: int = 2000) -> dict[str, Any]:
     """Decimated scalars, inhomogeneity and the last estimated field of one run."""
-    with np.load(path, allow_pickle=False) as z:
-        n = len(z["t"])
-        idx = _pick(n, max_points)
-        out: dict[str, Any] = {k: z[k][idx] for k in SCALARS if k in z.files}
-        if "field_hat" in z.files and len(z["field_hat"]):
-            fh = np.asarray(z["field_hat"], dtype=float)
-            tf = np.asarray(z["t_field"], dtype=float)
-            mask = fillet_mask(z["x"], z["y"], float(z["L_s"]), float(z["W_s"]))
-            T_ref_f = np.interp(tf, z["t"], z["T_ref"])
-            fidx = _pick(len(tf), max_points)
-            out["t_field"] = tf[fidx]
-            out["inhomogeneity"] = np.asarray(sup_norm(fh[fidx], T_ref_f[fidx], mask))
-            out["field"] = fh[-1]
-        out["n_samples"] = n
+    z = load_arrays(path)
+    n = len(z["t"])
+    idx = _pick(n, max_points)
+    out: dict[str, Any] = {k: z[k][idx] for k in SCALARS if k in z}
+    if "field_hat" in z and len(z["field_hat"]):
+        fh = np.asarray(z["field_hat"], dtype=float)
+        tf = np.asarray(z["t_field"], dtype=float)
+        fillet = Fillet.on_grid(z["x"], z["y"], float(z["L_s"]), float(z["W_s"]))
+        T_ref_f = np.interp(tf, z["t"], z["T_ref"])
+        fidx = _pick(len(tf), max_points)
+        out["t_field"] = tf[fidx]
+        out["inhomogeneity"] = np.asarray(fillet.sup(fh[fidx], T_ref_f[fidx]))
+        out["field"] = fh[-1]
+    out["n_samples"] = n
     return json_safe(out)

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from twin.runs.loop import Snapshot  # the real snapshot type: the stand-in loop differs only in physics
+from twin.physics.grid import cell_centers
+from twin.runs.record import RunHeader, RunRecord, Snapshot  # the real types: the stand-in differs only in physics
 
 REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault("FURNACE_TWIN_CACHE", str(REPO / ".cache" / "test-radiation"))
@@ -51,6 +52,13 @@ class FakeLoop:
     def __post_init__(self) -> None:
         self.reference = self.scenario.reference
         self.oscillation = self.scenario.oscillation
+        sp = self.cfg.specimen
+        x, y = cell_centers(self.cfg)
+        ref = self.scenario.reference
+        self.record = RunRecord(RunHeader(
+            x=x, y=y, tc_positions=np.asarray(self.cfg.tc_positions(self.scenario.tc4)), L_s=sp.length, W_s=sp.width,
+            t_E=float(ref.t_E), setpoint=float(ref.setpoint), group_names=tuple(g.name for g in self.cfg.lamps.groups),
+            scenario=self.scenario.to_json()))
 
     @property
     def done(self) -> bool:
@@ -86,6 +94,7 @@ class FakeLoop:
         )
         self.events.clear()
         self.rows.append(snap)
+        self.record.append(snap)
         return snap
 
     def set_reference(self, ref: Any) -> None:
@@ -102,16 +111,7 @@ class FakeLoop:
         self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {t_next:.1f} s")
 
     def timeseries(self) -> dict[str, Any]:
-        r, sp = self.rows, self.cfg.specimen
-        return {
-            "t": np.array([s.t for s in r]), "eta": np.array([s.eta for s in r]),
-            "T_ref": np.array([s.T_ref for s in r]), "T_mean_hat": np.array([s.T_mean_hat for s in r]),
-            "tc": np.array([s.tc for s in r]), "tc_hat": np.array([s.tc_hat for s in r]),
-            "u": np.array([s.u for s in r]), "u_ff": np.array([s.u_ff for s in r]),
-            "t_field": np.array([s.t for s in r]), "field_hat": np.array([s.field_hat for s in r]),
-            "x": (np.arange(sp.nx) + 0.5) * sp.length / sp.nx, "y": (np.arange(sp.ny) + 0.5) * sp.width / sp.ny,
-            "L_s": sp.length, "W_s": sp.width,
-        }
+        return self.record.arrays()
 
     def metrics(self) -> dict[str, Any]:
         err = [abs(s.T_mean_hat - s.T_ref) for s in self.rows]

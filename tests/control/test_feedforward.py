@@ -7,13 +7,9 @@ import pytest
 from controller_standin import make_standin
 
 from twin.config import small_config
-from twin.control.feedforward import (
-    FeedforwardError,
-    heating_efficiency,
-    simulate,
-    solve_feedforward,
-    transition_end,
-)
+from twin.control.feedforward import solve_feedforward, transition_end
+from twin.control.initial_guess import heating_efficiency
+from twin.control.plan import FeedforwardError, simulate
 from twin.control.reference import reference_trajectory
 from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution, smooth_min1
 from twin.scenario import TransitionReference

@@ -8,7 +8,6 @@ import scipy.linalg
 from controller_standin import make_standin
 
 from twin.config import small_config
-from twin.control.feedforward import FeedforwardPlan
 from twin.control.lqg import (
     Controller,
     IntegratorState,
@@ -18,6 +17,7 @@ from twin.control.lqg import (
     riccati_step,
     weight_matrix,
 )
+from twin.control.plan import FeedforwardPlan
 from twin.control.reference import steady_state
 
 

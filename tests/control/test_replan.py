@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from twin.config import small_config
-from twin.control.feedforward import _Grid, _parametrized_guess, heating_efficiency, solve_feedforward
+from twin.control.feedforward import solve_feedforward
+from twin.control.initial_guess import KnotGrid, heating_efficiency, parametrized_guess
 from twin.control.lqg import Controller
 from twin.control.reference import reference_trajectory
 from twin.control.replan import replan
@@ -93,10 +94,10 @@ def test_oscillation_switch_replans_on_the_averaged_model(first, model, cfg, sma
 
 def test_warm_start_keeps_the_previous_distribution(first, model):
     plan0, _ = first
-    grid = _Grid(10.0, model.t_s, 10, 12)
+    grid = KnotGrid(10.0, model.t_s, 10, 12)
     eta = heating_efficiency(model, np.full(model.n, 700.0))
     T_knots = np.full(grid.K + 1, 650.0)
-    x = _parametrized_guess(model, grid, 1, T_knots, plan0.theta_ref[100], plan0, eta, 0.01)
+    x = parametrized_guess(model, grid, 1, T_knots, plan0.theta_ref[100], plan0, eta, 0.01)
     d = x[: model.m]
     expected = np.maximum(plan0.u_c, 0.05)  # WARM_FLOOR keeps the start off the bounds
     np.testing.assert_allclose(d, expected / (eta @ expected), rtol=1e-12)
@@ -114,7 +115,7 @@ def test_free_replan_from_a_parametrized_plan(first, model, cfg):
 
 
 def test_replan_failure_raises_with_status(model, cfg):
-    from twin.control.feedforward import FeedforwardError
+    from twin.control.plan import FeedforwardError
 
     ref = reference_trajectory(TransitionReference(setpoint=700.0, t_E=20.0), T0)
     with pytest.raises(FeedforwardError, match="IPOPT status"):

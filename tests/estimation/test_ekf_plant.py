@@ -46,7 +46,7 @@ def run(small_radiation):
     tcs = Thermocouples(CFG, positions)
     phi4 = model.fe.phi(np.asarray(positions[3:]))
     rng = np.random.default_rng(20180611)
-    T = np.full(plant.n, s.initial_temperature)
+    state = plant.start(np.full(plant.n, s.initial_temperature))
     theta0 = s.initial_temperature + INITIAL_OFFSET
     clean, faulty = Estimator(model, CFG, theta0), Estimator(model, CFG, theta0)
     # the paper's EKF to the letter: Jacobian (16) at every sample, covariance (15) in float64
@@ -57,7 +57,7 @@ def run(small_radiation):
                                             "gap", "exact_gap", "exact_P_gap")}
     for j in range(int(round(2 * T_E / t_s))):
         t = j * t_s
-        y = tcs.read(T, rng, CFG.sensors.noise)
+        y = tcs.read(state.T, rng, CFG.sensors.noise)
         a = clean.update(y[:3])
         b = faulty.update(_faulty(y[:3], t))
         c = exact.update(y[:3])
@@ -72,7 +72,7 @@ def run(small_radiation):
         if j % 100 == 0:
             out["min_eig"].append(np.linalg.eigvalsh(b.P).min())
             assert np.array_equal(b.P, b.P.T)
-        T = plant.step(T, u, t, t_s, lambda _t: 0.0)
+        state = plant.advance(state, u, t_s, lambda _t: 0.0)
         clean.predict(u)
         faulty.predict(u)
         exact.predict(u)

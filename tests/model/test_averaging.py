@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from twin.model.averaging import average_weights, averaged_matrices, oscillation_weights, static_weights
+from twin.model.averaging import averaged_matrices
+from twin.physics.motion import average_weights, hat_weights, oscillation_weights
 from twin.scenario import OscillationSpec
 
 NODES = np.linspace(-0.05, 0.05, 13)  # the default table: 13 positions on [-eta_max, eta_max]
@@ -40,7 +41,7 @@ def test_fixed_specimen_is_the_special_case() -> None:
     np.testing.assert_allclose(average_weights(NODES, OscillationSpec(enabled=False)), np.eye(13)[6], atol=0)
     np.testing.assert_allclose(oscillation_weights(NODES, 0.0), np.eye(13)[6], atol=0)
     # eta = 0.01 m lies between nodes 7 (1/120 m) and 8 (2/120 m): weights 0.8 and 0.2
-    w = static_weights(NODES, 0.01)
+    w = hat_weights(NODES, 0.01)
     np.testing.assert_allclose(w[7:9], [0.8, 0.2], rtol=1e-12)
     assert w.sum() == pytest.approx(1.0, abs=1e-15)
 

@@ -30,13 +30,13 @@ def _run(radiation, oscillation, distribution):
     u = model.hold_powers(SETPOINT, distribution)
     plant = Plant(CFG, radiation)
     eta = eta_function(oscillation) if oscillation is not None else (lambda t: 0.0)
-    T = np.full(plant.n, CFG.specimen.initial_temperature)
+    state = plant.start(np.full(plant.n, CFG.specimen.initial_temperature))
     theta = np.full(model.n, CFG.specimen.initial_temperature)
     t_s = CFG.sampling.t_s
-    for j in range(int(round(DURATION / t_s))):
-        T = plant.step(T, u, j * t_s, t_s, eta)
+    for _ in range(int(round(DURATION / t_s))):
+        state = plant.advance(state, u, t_s, eta)
         theta = model.step(theta, u)
-    return model, plant, T, theta
+    return model, plant, state.T, theta
 
 
 @pytest.mark.slow

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from twin.runs.metrics import compute_metrics, fillet_mask, sup_norm, window
+from twin.physics.fillet import Fillet
+from twin.runs.metrics import compute_metrics, window
 
 
 def _series(n_t: int = 201, t_E: float = 10.0) -> dict:
@@ -57,11 +58,12 @@ def test_hot_spot_outside_fillet_is_ignored():
 def test_fillet_mask_counts_cells():
     x = (np.arange(26) + 0.5) / 26
     y = (np.arange(17) + 0.5) / 17
-    mask = fillet_mask(x, y, 1.0, 1.0)
+    fillet = Fillet.on_grid(x, y, 1.0, 1.0)
+    mask = fillet.mask
     # x-centres in [0.25, 0.75]: i = 7..19 -> 13... checked by direct count below (independent loop)
     expected = sum(1 for xi in x for yj in y if 0.25 <= xi <= 0.75 and 0.2 <= yj <= 0.8)
     assert mask.sum() == expected
-    assert sup_norm(np.zeros((2, 17, 26)), np.array([1.0, 2.0]), mask).tolist() == [1.0, 2.0]
+    assert fillet.sup(np.zeros((2, 17, 26)), np.array([1.0, 2.0])).tolist() == [1.0, 2.0]
 
 
 def test_stopped_run_gives_nan_for_missing_windows():

@@ -56,14 +56,16 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution, casadi_objective
+from twin.control.initial_guess import V_MAX, KnotGrid, free_guess, heating_efficiency, knot_weights, parametrized_guess
+from twin.control.ipopt_callbacks import casadi_objective
+from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
+from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution
 from twin.model.dynamics import DiscreteDynamics
 
 log = logging.getLogger(__name__)
@@ -75,15 +77,10 @@ RefFn = Callable[[Any], Any]
 DEFAULT_INTERVAL_S = 1.0
 #: Largest h |lambda_max| of the Heun substeps (stability limit of Heun on the real axis is 2).
 HEUN_STEP_LIMIT = 1.0
-#: Upper bound of v in the scaling eta^T d = 1 (mean eta = 1): every group with d_i >= 1/V_MAX can
-#: saturate, and v = V_MAX is V_MAX times the mean heating power of all groups at full power.
-V_MAX = 20.0
 #: rho of the Tikhonov term rho * mean_k(v_k^2) (K^2) added to (20a): far below one K^2 of
 #: tracking error, it only removes the flat directions of v where every used group saturates
 #: (there the cost does not depend on v and the Gauss-Newton Hessian is singular).
 INPUT_REGULARIZATION = 1e-3
-#: Smallest share (of the largest group) a warm-started distribution starts with.
-WARM_FLOOR = 0.05
 #: Shortest OCP horizon in fillet-mean time constants (a re-plan at or after the end of a
 #: transition still needs the settling; 2 tau = 86 % settled, a compromise with the re-plan time).
 SETTLE_TIME_CONSTANTS = 2.0
@@ -91,120 +88,7 @@ SETTLE_TIME_CONSTANTS = 2.0
 MAX_REFERENCE_S = 3600.0
 
 
-class FeedforwardError(RuntimeError):
-    """IPOPT did not solve the feedforward OCP; ``status`` holds its return status."""
-
-    def __init__(self, message: str, status: str) -> None:
-        super().__init__(message)
-        self.status = status
-
-
-@dataclass(frozen=True)
-class FeedforwardPlan:
-    """Feedforward inputs and the nominal reference state along them (eq. 17, section 4).
-
-    Sample j of the plan is at run time ``t[j] = t0 + j t_s``.
-
-    Attributes
-    ----------
-    t : array (N + 1,)
-        Run times (s) of the samples 0..N.
-    u_ff : array (N, m)
-        Feedforward group fractions u_ff,j, held over [t_j, t_j+1) (eq. 18).
-    theta_ref : array (N + 1, n)
-        Nominal model state (K) under u_ff from the plan's initial state (eq. 12a, w = 0).
-    T_ref : array (N + 1,)
-        Requested fillet mean temperature T_ref,j (K) at ``t``.
-    T_mean : array (N + 1,)
-        Fillet mean of the nominal state, c_m^T theta_ref,j (K) (eq. 19).
-    status : str
-        IPOPT return status (``"Solve_Succeeded"`` ...) or the name of the source of the plan.
-    iterations : int
-        IPOPT iterations.
-    solve_s : float
-        Wall time of the whole plan (OCP set-up, solve, fine simulation) (s).
-    success : bool
-        Whether the solver reported success.
-    u_c : array (m,) or None
-        Constant power distribution of eq. (18), max(u_c) = 1 (parametrized OCP), else None.
-    v : array (N,) or None
-        Scalar amplification v_j of eq. (18) at the samples (parametrized OCP), else None.
-    objective : float
-        Cost (20a) of the fine-grid plan, per sample: mean of g0 e_j^2 + g1 kappa_j (K^2).
-    warm : dict
-        Solver data to warm-start a later OCP (knot times, decision values).
-    """
-
-    t: Array
-    u_ff: Array
-    theta_ref: Array
-    T_ref: Array
-    T_mean: Array
-    status: str
-    iterations: int
-    solve_s: float
-    success: bool
-    u_c: Array | None = None
-    v: Array | None = None
-    objective: float = float("nan")
-    warm: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def t0(self) -> float:
-        """Run time (s) of the first sample."""
-        return float(self.t[0])
-
-    @property
-    def t_s(self) -> float:
-        """Sampling time (s)."""
-        return float(self.t[1] - self.t[0])
-
-    @property
-    def n_steps(self) -> int:
-        """N, the number of input samples."""
-        return int(self.u_ff.shape[0])
-
-    @property
-    def max_mean_error(self) -> float:
-        """max_j |c_m^T theta_ref,j - T_ref,j| (K): how well the nominal plan tracks T_ref."""
-        return float(np.max(np.abs(self.T_mean - self.T_ref)))
-
-    def index_at(self, t: float) -> int:
-        """Sample index j of run time ``t`` (s) relative to the plan start (may be >= N)."""
-        return int(round((t - self.t0) / self.t_s))
-
-    def sample(self, j: int) -> tuple[Array, Array, float]:
-        """(u_ff,j, theta_ref,j, T_ref,j); beyond the horizon the last values are held."""
-        if j < 0:
-            raise IndexError(f"sample {j} lies before the plan start")
-        ju = min(j, self.n_steps - 1)
-        jx = min(j, self.n_steps)
-        return self.u_ff[ju], self.theta_ref[jx], float(self.T_ref[jx])
-
-    def v_at(self, t: ArrayLike) -> Array:
-        """v(t) of the parametrized plan at run times ``t`` (held per OCP interval and outside)."""
-        tk = np.asarray(self.warm["t_knots"], float)
-        v = np.asarray(self.warm["v"], float)
-        k = np.clip(np.searchsorted(tk, np.asarray(t, float), side="right") - 1, 0, len(v) - 1)
-        return np.asarray(v[k], float)
-
-
 # --------------------------------------------------------------------------- helpers
-def simulate(model: DiscreteDynamics, theta0: ArrayLike, u: ArrayLike) -> Array:
-    """theta_0..theta_N of eq. (12a) with w = 0 under the inputs u (N, m); shape (N + 1, n)."""
-    uu = np.asarray(u, float)
-    out = np.empty((uu.shape[0] + 1, model.n))
-    out[0] = np.asarray(theta0, float)
-    for j in range(uu.shape[0]):
-        out[j + 1] = model.step(out[j], uu[j])
-    return out
-
-
-def saturation(z: ArrayLike) -> Array:
-    """sat of eq. (18) for u_max = 1: clip to [0, 1]."""
-    return np.clip(np.asarray(z, float), 0.0, 1.0)
-
-
 def _ca() -> Any:
     import casadi
 
@@ -239,93 +123,7 @@ def _fastest_rate(model: DiscreteDynamics, theta: Array, u: Array) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(J))))
 
 
-def _heun_interval(model: DiscreteDynamics, theta: Array, u: Array, dt: float, n_heun: int) -> Array:
-    """theta after dt under constant u: Heun substeps on f = (F - theta) / t_s (eq. 12a)."""
-    h = dt / n_heun
-    for _ in range(n_heun):
-        k1 = (np.asarray(model.step(theta, u), float) - theta) / model.t_s
-        mid = theta + h * k1
-        k2 = (np.asarray(model.step(mid, u), float) - mid) / model.t_s
-        theta = theta + 0.5 * h * (k1 + k2)
-    return theta
-
-
-def _tracking_amplification(model: DiscreteDynamics, dt: float, n_heun: int, T_knots: Array, th0: Array,
-                            d: Array, width: float) -> Array:
-    """v_k per interval such that u = smin(v_k d) brings c_m^T theta to T_ref at the next knot.
-
-    A cheap inversion of the mean dynamics knot by knot (regula falsi on v in
-    [0, V_MAX]; the mean after an interval grows monotonically with v), so the OCP
-    starts from good mean tracking with the given distribution d.
-    """
-    from twin.control.shooting import smooth_min1
-
-    K = len(T_knots) - 1
-    v_out = np.empty(K)
-    theta = np.asarray(th0, float)
-    c = np.asarray(model.c_m, float)
-
-    def mean_after(v: float) -> tuple[float, Array]:
-        nxt = _heun_interval(model, theta, smooth_min1(v * d, width)[0], dt, n_heun)
-        return float(c @ nxt), nxt
-
-    for k in range(K):
-        target = T_knots[k + 1]
-        a, (fa, xa) = 0.0, mean_after(0.0)
-        b, (fb, xb) = V_MAX, mean_after(V_MAX)
-        if target <= fa:
-            v, theta = a, xa
-        elif target >= fb:
-            v, theta = b, xb
-        else:
-            v, x = a, xa
-            for _ in range(12):  # Illinois regula falsi: superlinear, bracket kept
-                v = b - (fb - target) * (b - a) / (fb - fa)
-                fv, x = mean_after(v)
-                if abs(fv - target) < 1e-3:
-                    break
-                if (fv - target) * (fb - target) < 0:
-                    a, fa = b, fb
-                else:
-                    fa = target + 0.5 * (fa - target)
-                b, fb = v, fv
-            theta = x
-        v_out[k] = v
-    return v_out
-
-
 # --------------------------------------------------------------------------- the NLP
-@dataclass(frozen=True)
-class _Grid:
-    t0: float
-    t_s: float
-    substeps: int  # samples per knot interval
-    K: int  # knot intervals
-
-    @property
-    def N(self) -> int:
-        return self.K * self.substeps
-
-    @property
-    def dt(self) -> float:
-        return self.substeps * self.t_s
-
-    @property
-    def t_knots(self) -> Array:
-        return np.asarray(self.t0 + self.dt * np.arange(self.K + 1), dtype=np.float64)
-
-    @property
-    def t_fine(self) -> Array:
-        return np.asarray(self.t0 + self.t_s * np.arange(self.N + 1), dtype=np.float64)
-
-
-def _knot_weights(grid: _Grid) -> Array:
-    """Trapezoidal weights over knots 1..K (knot 0 is fixed), normalized to the mean per sample."""
-    w = np.full(grid.K, float(grid.substeps))
-    w[-1] *= 0.5
-    return w / grid.N
-
-
 def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | None) -> dict[str, Any]:
     """IPOPT options (stack-notes.md).
 
@@ -428,7 +226,7 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     if horizon is None:
         horizon = max(fw.beta * (t_end - t0), SETTLE_TIME_CONSTANTS * mean_time_constant(model, theta_lin, u_mid))
     K = max(2, int(math.ceil(horizon / (substeps * t_s) - 1e-9)))
-    grid = _Grid(float(t0), t_s, substeps, K)
+    grid = KnotGrid(float(t0), t_s, substeps, K)
     # Heun substeps: h |lambda_max| <= HEUN_STEP_LIMIT at the hottest state planned for
     T_hot = max(T_final, float(np.max(np.asarray(T_ref_fn(grid.t_knots), float))), float(np.max(th0)))
     lam = _fastest_rate(model, np.full(model.n, T_hot), u_mid)
@@ -442,16 +240,16 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
         lbx = np.zeros(inputs.n_params)
         eta = heating_efficiency(model, theta_lin)
         ubx = np.concatenate([1.0 / eta, np.full(grid.K, V_MAX)])  # d_i <= 1 / eta_i from eta^T d = 1
-        x_init = _parametrized_guess(model, grid, n_heun, T_knots, th0, warm_start, eta, fw.smoothing)
+        x_init = parametrized_guess(model, grid, n_heun, T_knots, th0, warm_start, eta, fw.smoothing)
     else:
         inputs = FreeInputs(m, grid.K)
         lbx = np.zeros(inputs.n_params)
         ubx = np.ones(inputs.n_params)
-        x_init = _free_guess(model, grid, n_heun, T_knots, th0, warm_start, fw.smoothing)
+        x_init = free_guess(model, grid, n_heun, T_knots, th0, warm_start, fw.smoothing)
     reg = np.full(inputs.n_params, INPUT_REGULARIZATION / grid.K)
     if parametrized:
         reg[:m] = 0.0  # the distribution d is fixed by eta^T d = 1; only v needs it
-    shooting = CoarseShooting(model, th0, grid.dt, n_heun, T_knots, _knot_weights(grid), fw.g0, fw.g1, inputs,
+    shooting = CoarseShooting(model, th0, grid.dt, n_heun, T_knots, knot_weights(grid), fw.g0, fw.g1, inputs,
                               reg)
     x = ca.MX.sym("p", inputs.n_params)
     if parametrized:
@@ -513,54 +311,6 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
         n_heun, plan.max_mean_error,
     )
     return plan
-
-
-def heating_efficiency(model: DiscreteDynamics, theta: Array) -> Array:
-    """eta_i = c_m^T dF/du_i / t_s: fillet-mean heating rate (K/s) per unit fraction of group i,
-    normalized to mean 1 (eqs. 12a, 19).  Used to normalize the distribution: eta^T d = 1."""
-    B = np.asarray(model.jac_u(theta, np.full(model.m, 0.5)), float) / model.t_s
-    eta = np.asarray(model.c_m, float) @ B
-    if np.any(eta <= 0):
-        raise FeedforwardError("a lamp group does not heat the fillet (c_m^T B_i <= 0)", "model")
-    return np.asarray(eta / eta.mean(), float)
-
-
-def _parametrized_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
-                        warm: FeedforwardPlan | None, eta: Array, width: float) -> Array:
-    """Initial (d, v) with eta^T d = 1.
-
-    d: the previous plan's distribution u_c (or its mean free inputs) if given, else
-    uniform inputs; v: the mean-tracking amplification for that d
-    (:func:`_tracking_amplification`).  Reusing the previous v(t) instead starts far
-    off after a reference change (it tracks the old reference), and IPOPT then needed
-    four times the iterations of a cold start.
-    """
-    if warm is not None and warm.u_c is not None:
-        d = np.asarray(warm.u_c, float)
-    elif warm is not None:
-        d = warm.u_ff.mean(axis=0) / max(float(warm.u_ff.mean(axis=0).max()), 1e-9)
-    else:
-        d = np.ones(model.m)
-    d = np.maximum(d, WARM_FLOOR)  # an interior start: IPOPT moves slowly off a bound
-    d = d / float(eta @ d)
-    v = _tracking_amplification(model, grid.dt, n_heun, T_knots, th0, d, width)
-    return np.concatenate([d, v])
-
-
-def _free_guess(model: DiscreteDynamics, grid: _Grid, n_heun: int, T_knots: Array, th0: Array,
-                warm: FeedforwardPlan | None, width: float) -> Array:
-    """Initial free inputs (K, m) row-major: the previous plan's inputs on the new intervals
-    if given, else uniform mean-tracking inputs."""
-    if warm is not None:
-        t_mid = grid.t_knots[:-1] + 0.5 * grid.dt
-        tw = warm.t[:-1]
-        U = np.column_stack([np.interp(t_mid, tw, warm.u_ff[:, i]) for i in range(model.m)])
-        return np.clip(U, 0.0, 1.0).ravel()
-    ones = np.ones(model.m)
-    v = _tracking_amplification(model, grid.dt, n_heun, T_knots, th0, ones, width)
-    from twin.control.shooting import smooth_min1
-
-    return np.repeat(smooth_min1(v, width)[0][:, None], model.m, axis=1).ravel()
 
 
 def ocp_seconds(cfg: FurnaceConfig, radiation: Any) -> float:

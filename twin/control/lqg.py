@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.control.feedforward import FeedforwardPlan
+from twin.control.plan import FeedforwardPlan
 from twin.model.dynamics import DiscreteDynamics
 
 log = logging.getLogger(__name__)

@@ -36,6 +36,7 @@ from scipy.interpolate import CubicHermiteSpline, PchipInterpolator
 
 from twin.config import FurnaceConfig
 from twin.model.dynamics import DiscreteDynamics
+from twin.numerics import damped_newton
 from twin.scenario import PointsReference, TransitionReference
 
 log = logging.getLogger(__name__)
@@ -223,18 +224,14 @@ def steady_state(model: DiscreteDynamics, u: ArrayLike, theta_guess: ArrayLike, 
         If Newton does not converge in ``max_iter`` iterations.
     """
     uu = np.asarray(u, float)
-    theta = np.array(theta_guess, dtype=float)
     eye = np.eye(model.n)
-    for _ in range(max_iter):
-        res = np.asarray(model.step(theta, uu), float) - theta
-        jac = np.asarray(model.jac_theta(theta, uu), float) - eye
-        d = np.linalg.solve(jac, -res)
-        # damp steps larger than 500 K in any node: the T^4 terms make far Newton steps overshoot
-        scale = min(1.0, 500.0 / max(float(np.max(np.abs(d))), 1e-300))
-        theta = theta + scale * d
-        if float(np.max(np.abs(d))) < tol:
-            return theta
-    raise ReferenceError("steady state of the model did not converge")
+    # steps larger than 500 K in any node are damped: the T^4 terms make far Newton steps overshoot
+    return damped_newton(
+        lambda th: np.asarray(model.step(th, uu), float) - th,
+        lambda th: np.asarray(model.jac_theta(th, uu), float) - eye,
+        np.asarray(theta_guess, float), tol=tol, max_iter=max_iter, max_step=500.0,
+        what="steady state of the model", error=ReferenceError,
+    )
 
 
 def reachable_range(model: DiscreteDynamics, cfg: FurnaceConfig) -> tuple[float, float]:

@@ -24,8 +24,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
-from twin.control.feedforward import FeedforwardPlan, RefFn, solve_feedforward
+from twin.control.feedforward import RefFn, solve_feedforward
 from twin.control.lqg import Gains, lqg_gains
+from twin.control.plan import FeedforwardPlan
 
 log = logging.getLogger(__name__)
 

@@ -20,12 +20,13 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from twin.model.dynamics import DiscreteDynamics
+from twin.numerics import heun_step
 
 Array = NDArray[np.float64]
 
@@ -133,6 +134,20 @@ class SweepResult:
     theta: Array  # (K + 1, n)
 
 
+def heun_interval(model: DiscreteDynamics, theta: Array, u: Array, dt: float, n_heun: int) -> Array:
+    """theta after dt under constant u: ``n_heun`` Heun sub-steps on f = (F(theta, u) - theta) / t_s (eq. 12a)."""
+    t_s = model.t_s
+
+    def f(_t: float, x: Array) -> Array:
+        return (np.asarray(model.step(x, u), float) - x) / t_s
+
+    h = dt / n_heun
+    th = np.asarray(theta, float)
+    for _ in range(n_heun):
+        th = heun_step(f, 0.0, th, h)
+    return th
+
+
 class CoarseShooting:
     """Cost, gradient and Hessian approximation of the coarse single-shooting OCP.
 
@@ -188,12 +203,7 @@ class CoarseShooting:
         return J, B
 
     def _interval(self, theta: Array, u: Array) -> Array:
-        h = self.dt / self.n_heun
-        for _ in range(self.n_heun):
-            k1 = self._f(theta, u)
-            k2 = self._f(theta + h * k1, u)
-            theta = theta + 0.5 * h * (k1 + k2)
-        return theta
+        return heun_interval(self.model, theta, u, self.dt, self.n_heun)
 
     def _interval_jacobians(self, theta: Array, u: Array) -> tuple[Array, list[tuple[Array, ...]]]:
         """theta_k+1 and the Jacobians (J1, B1, J2, B2) of both Heun stages of every substep."""
@@ -314,123 +324,3 @@ class CoarseShooting:
 
 
 # --------------------------------------------------------------------------- CasADi glue
-def casadi_objective(shooting: CoarseShooting, n_g: int) -> tuple[Any, Any, Any]:
-    """(f, grad_f, hess_lag) CasADi Callbacks for ``nlpsol`` (options "grad_f", "hess_lag").
-
-    The Hessian of the Lagrangian is the Gauss-Newton matrix of the cost times lam_f
-    (the constraints of the OCP are linear and add nothing).
-    """
-    import casadi as ca
-
-    npar = shooting.map.n_params
-    dense = ca.Sparsity.dense(npar, 1)
-
-    class _Jac(ca.Callback):
-        def __init__(self, name: str, opts: dict[str, Any]) -> None:
-            ca.Callback.__init__(self)
-            self.construct(name, opts)
-
-        def get_n_in(self) -> int:
-            return 2
-
-        def get_n_out(self) -> int:
-            return 1
-
-        def get_sparsity_in(self, i: int) -> Any:
-            return dense if i == 0 else ca.Sparsity.dense(1, 1)
-
-        def get_sparsity_out(self, i: int) -> Any:
-            return ca.Sparsity.dense(1, npar)
-
-        def eval(self, arg: Any) -> Any:
-            g = shooting.sweep(np.asarray(arg[0], float).ravel()).grad
-            assert g is not None
-            return [ca.DM(g).T]
-
-    class _Objective(ca.Callback):
-        def __init__(self) -> None:
-            ca.Callback.__init__(self)
-            self._jac: Any = None
-            self.construct("ocp_cost", {})
-
-        def get_n_in(self) -> int:
-            return 1
-
-        def get_n_out(self) -> int:
-            return 1
-
-        def get_sparsity_in(self, i: int) -> Any:
-            return dense
-
-        def get_sparsity_out(self, i: int) -> Any:
-            return ca.Sparsity.dense(1, 1)
-
-        def eval(self, arg: Any) -> Any:
-            return [shooting.cost(np.asarray(arg[0], float).ravel())]
-
-        def has_jacobian(self) -> bool:
-            return True
-
-        def get_jacobian(self, name: Any, inames: Any, onames: Any, opts: Any) -> Any:
-            self._jac = _Jac(name, opts)
-            return self._jac
-
-    class _Grad(ca.Callback):
-        def __init__(self) -> None:
-            ca.Callback.__init__(self)
-            self.construct("ocp_grad_f", {})
-
-        def get_n_in(self) -> int:
-            return 2
-
-        def get_n_out(self) -> int:
-            return 2
-
-        def get_name_in(self, i: int) -> str:
-            return ["x", "p"][i]
-
-        def get_name_out(self, i: int) -> str:
-            return ["f", "grad"][i]
-
-        def get_sparsity_in(self, i: int) -> Any:
-            return dense if i == 0 else ca.Sparsity(0, 0)
-
-        def get_sparsity_out(self, i: int) -> Any:
-            return ca.Sparsity.dense(1, 1) if i == 0 else dense
-
-        def eval(self, arg: Any) -> Any:
-            r = shooting.sweep(np.asarray(arg[0], float).ravel())
-            assert r.grad is not None
-            return [r.cost, ca.DM(r.grad)]
-
-    class _Hess(ca.Callback):
-        def __init__(self, n_g: int) -> None:
-            ca.Callback.__init__(self)
-            self.n_g = n_g
-            self.construct("ocp_hess_lag", {})
-
-        def get_n_in(self) -> int:
-            return 4
-
-        def get_n_out(self) -> int:
-            return 1
-
-        def get_name_in(self, i: int) -> str:
-            return ["x", "p", "lam_f", "lam_g"][i]
-
-        def get_name_out(self, i: int) -> str:
-            return "hess"
-
-        def get_sparsity_in(self, i: int) -> Any:
-            return [dense, ca.Sparsity(0, 0), ca.Sparsity.dense(1, 1), ca.Sparsity.dense(self.n_g, 1)][i]
-
-        def get_sparsity_out(self, i: int) -> Any:
-            return ca.Sparsity.upper(npar)
-
-        def eval(self, arg: Any) -> Any:
-            r = shooting.sweep(np.asarray(arg[0], float).ravel())
-            assert r.hess is not None
-            lam_f = float(arg[2])
-            return [ca.triu(ca.DM(lam_f * r.hess))]
-
-    return _Objective(), _Grad(), _Hess(n_g)

@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from twin.config import FurnaceConfig
 from twin.model.averaging import averaged_matrices
 from twin.model.fe import FEModel
+from twin.numerics import damped_newton
 from twin.physics.boundary import face_loss_coefficients
 from twin.scenario import OscillationSpec
 
@@ -147,15 +148,10 @@ class DiscreteModel:
     def steady_state(self, u: ArrayLike, theta0: ArrayLike | None = None) -> Array:
         """theta with f(theta, u) = 0 (Newton on the continuous-time model), K."""
         uu = np.asarray(u, float)
-        th = np.full(self.n, 1000.0) if theta0 is None else np.asarray(theta0, float).copy()
-        for _ in range(100):
-            r = self.rhs(th, uu)
-            J = (self.jac_theta(th) - np.eye(self.n)) / self.t_s
-            dth = np.linalg.solve(J, -r)
-            th = th + dth
-            if np.max(np.abs(dth)) < 1e-9:
-                return th
-        raise RuntimeError("steady_state: Newton did not converge")
+        th = np.full(self.n, 1000.0) if theta0 is None else np.asarray(theta0, float)
+        eye = np.eye(self.n)
+        return damped_newton(lambda x: self.rhs(x, uu), lambda x: (self.jac_theta(x) - eye) / self.t_s, th,
+                             tol=1e-9, max_iter=100, what="steady_state: Newton", error=RuntimeError)
 
     def hold_powers(self, T_mean: float, distribution: ArrayLike | None = None) -> Array:
         """Group fractions u = s * distribution whose steady state has the fillet mean c_m^T theta = T_mean.

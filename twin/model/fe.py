@@ -33,7 +33,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.physics.boundary import cell_centers, edge_losses, inert_gas_temperature
+from twin.physics.boundary import edge_losses, inert_gas_temperature
+from twin.physics.fillet import Fillet
+from twin.physics.grid import cell_centers
 from twin.physics.materials import Steel
 
 Array = NDArray[np.float64]
@@ -217,20 +219,34 @@ class FEModel:
         )
 
     @cached_property
-    def c_m(self) -> Array:
-        """Fillet mean weights c_m = int_{Omega_f} phi dOmega / A_f, (N~,) (eq. 19)."""
+    def c_m_exact(self) -> Array:
+        """Eq. (19) as written: c = int_{Omega_f} phi dOmega / A_f, (N~,), the exact mean of the FE field."""
         cx, cy, _, _, area = self._fillet_factors
         return np.asarray(np.kron(cy, cx) / area, float)
 
     @cached_property
+    def c_m(self) -> Array:
+        """Fillet mean weights (N~,): c_m^T theta is the fillet mean of the model's field on the FD cells.
+
+        c_m = M_theta^T a with a the cell area weights of :class:`twin.physics.fillet.Fillet`, so the
+        estimated mean is the same functional the metrics apply to the true field (product.md).  It
+        differs from eq. (19) integrated exactly (:attr:`c_m_exact`) only by the cell quadrature
+        of the bilinear FE field.
+        """
+        return np.asarray(self.M_theta.T @ Fillet.of(self.cfg).flat_weights, float)
+
+    @cached_property
     def W(self) -> Array:
-        """Inhomogeneity matrix W = int_{Omega_f} phi phi^T dOmega / A_f - c_m c_m^T (eq. 21)."""
+        """Inhomogeneity matrix W = int_{Omega_f} phi phi^T dOmega / A_f - c c^T (eq. 21), c exact (19).
+
+        theta^T W theta is the variance of the FE field over the fillet (W 1 = 0).
+        """
         _, _, wx, wy, area = self._fillet_factors
-        return np.kron(wy, wx) / area - np.outer(self.c_m, self.c_m)
+        return np.kron(wy, wx) / area - np.outer(self.c_m_exact, self.c_m_exact)
 
     # ---- evaluation helpers ----
     def fillet_mean(self, theta: ArrayLike) -> float:
-        """T~ = c_m^T theta in K (eq. 19)."""
+        """T~ = c_m^T theta in K (eq. 19 on the FD cells, see :attr:`c_m`)."""
         return float(self.c_m @ np.asarray(theta, float))
 
     @cached_property

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
+from twin.physics.grid import cell_centers
 
 Array = NDArray[np.float64]
 
@@ -50,12 +51,6 @@ def inert_gas_temperature(cfg: FurnaceConfig, x: ArrayLike) -> Array:
     g, L = cfg.inert_gas, cfg.specimen.length
     xr = np.asarray(x, float) / L
     return g.temperature_top + (g.temperature_bottom - g.temperature_top) * xr
-
-
-def cell_centers(cfg: FurnaceConfig) -> tuple[Array, Array]:
-    """FD cell centres x_i (N_x,), y_j (N_y,) in m: (i + 0.5) L_s / N_x (section 2.1)."""
-    s = cfg.specimen
-    return (np.arange(s.nx) + 0.5) * s.length / s.nx, (np.arange(s.ny) + 0.5) * s.width / s.ny
 
 
 def clamped_fraction(cfg: FurnaceConfig) -> Array:

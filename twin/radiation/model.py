@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.physics.geometry import furnace_geometry
+from twin.physics.motion import hat_weights
 from twin.radiation.net_radiation import net_radiation_matrix, specimen_matrices
 
 Array = NDArray[np.float64]
@@ -103,17 +104,8 @@ class RadiationModel:
         return int(self.P1.shape[1])
 
     def weights(self, eta: float) -> Array:
-        """Hat-function weights (n_eta,) of linear interpolation in eta; eta is clamped to the table."""
-        nodes = self.eta_nodes
-        w = np.zeros(len(nodes))
-        if len(nodes) == 1:
-            w[0] = 1.0
-            return w
-        e = min(max(float(eta), nodes[0]), nodes[-1])
-        k = min(int(np.searchsorted(nodes, e, side="right")) - 1, len(nodes) - 2)
-        t = (e - nodes[k]) / (nodes[k + 1] - nodes[k])
-        w[k], w[k + 1] = 1.0 - t, t
-        return w
+        """Hat-function weights (n_eta,) of linear interpolation in eta (:func:`twin.physics.motion.hat_weights`)."""
+        return hat_weights(self.eta_nodes, eta)
 
     def matrices(self, eta: float) -> tuple[Array, Array]:
         """Interpolated P1(eta), P2(eta) (builds two matrices; use :meth:`flux` in loops)."""

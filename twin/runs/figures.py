@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 from matplotlib.layout_engine import ConstrainedLayoutEngine  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from twin.runs.metrics import fillet_mask, sup_norm  # noqa: E402
+from twin.physics.fillet import FILLET_X, FILLET_Y, Fillet  # noqa: E402
 
 TC_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 GROUP_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
@@ -34,9 +34,9 @@ def _pct(values: Any, scale: float) -> Any:
 
 def _sup_series(ts: Mapping[str, Any], key: str = "field_hat") -> tuple[Any, Any]:
     tf = np.asarray(ts["t_field"], float)
-    mask = fillet_mask(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
+    fillet = Fillet.on_grid(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
     ref = np.interp(tf, np.asarray(ts["t"], float), np.asarray(ts["T_ref"], float))
-    return tf, sup_norm(np.asarray(ts[key], float), ref, mask)
+    return tf, fillet.sup(np.asarray(ts[key], float), ref)
 
 
 def _group_names(ts: Mapping[str, Any], n: int) -> list[str]:
@@ -125,7 +125,8 @@ def plot_run_field(ts: Mapping[str, Any], path: Path, title: str = "") -> Path:
     )
     fig.colorbar(im, ax=ax[0], label="T / T_ref(t_E) (%)", shrink=0.8, pad=0.02)
     ax[0].add_patch(
-        Rectangle((25 * L_s, 20 * W_s), 50 * L_s, 60 * W_s, fill=False, ec="w", lw=1.5, ls="--", label="fillet")
+        Rectangle((100 * FILLET_X[0] * L_s, 100 * FILLET_Y[0] * W_s), 100 * (FILLET_X[1] - FILLET_X[0]) * L_s,
+                  100 * (FILLET_Y[1] - FILLET_Y[0]) * W_s, fill=False, ec="w", lw=1.5, ls="--", label="fillet")
     )
     if tcp is not None:
         for i, (px, py) in enumerate(tcp):

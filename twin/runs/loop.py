@@ -1,23 +1,24 @@
-"""The closed loop: plant -> three TCs -> EKF -> LQG + feedforward -> inputs -> plant.
+"""The closed loop: furnace -> three TCs -> EKF -> LQG + feedforward -> group powers -> furnace.
 
-This is the only module where the simulated furnace, its sensors, the estimator
-and the controller meet (architecture.md).  Data flows one way; the plant's true
-state never reaches the estimator or the controller: they see only the three TC
-readings y_j and the inputs they applied themselves.
+This is the only module where a furnace (:class:`twin.furnace.interface.Furnace`: the
+simulated one, or a real one) and the twin (estimator and controller) meet (architecture.md).
+Data flows one way; the furnace's state never reaches the estimator or the controller: they
+see only the TC readings and the inputs they applied themselves.  A simulated furnace's
+true field is recorded beside the estimate for the metrics, nothing more.
 
 Per sample j (t_j = j t_s), following the paper's order (eqs. 13, 17, 25, 14):
 
-1. the TCs read the plant at t_j (noise from the scenario's seed);
-2. the EKF corrects its prior with y_j = (TC1, TC2, TC3)       (eq. 13);
-3. the controller returns u_j = sat(u_ff_j + K_j e_j)          (eqs. 17, 25);
-4. the plant integrates over [t_j, t_j + t_s] with u_j held    (zero-order hold);
-5. the EKF predicts theta^-_{j+1} = F(theta_j, u_j)            (eq. 14).
+1. the furnace's TCs are read at t_j (value, timestamp, status per TC);
+2. the EKF corrects its prior with the usable ones of y_j = (TC1, TC2, TC3)   (eq. 13);
+3. the controller returns u_j = sat(u_ff_j + K_j e_j)                       (eqs. 17, 25);
+4. the furnace holds u_j over [t_j, t_j + t_s] (zero-order hold);
+5. the EKF predicts theta^-_{j+1} = F(theta_j, u_j)                         (eq. 14).
 
 Each call of :meth:`ClosedLoop.step` returns an immutable :class:`Snapshot` of
 sample j.  Runs are deterministic for a seed.
 
 Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`)
-take effect at the next sample: the reference (and the plant's motion) switch at
+take effect at the next sample: the reference (and the furnace's motion) switch at
 once, while the new feedforward, reference state, gains and model are re-planned
 from the current estimate, in a background thread when ``background=True`` (the
 backend) so the loop never stalls, and swapped in at the first sample after the
@@ -27,51 +28,36 @@ Example
 -------
 >>> from twin.config import small_config
 >>> from twin.scenario import Scenario
->>> loop = ClosedLoop(small_config(), Scenario(duration=1.0))  # doctest: +SKIP
->>> snaps = list(loop.run())                                    # doctest: +SKIP
+>>> loop = ClosedLoop(small_config(), Scenario(duration=0.5, reference={"setpoint": 400.0, "t_E": 10.0}))
+>>> snaps = list(loop.run())
+>>> len(snaps), snaps[-1].t, loop.record.arrays()["T_mean_hat"].shape
+(6, 0.5, (6,))
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
-from twin.runs.metrics import compute_metrics, fillet_mask, fillet_mean, sup_norm
+from twin.furnace.interface import Furnace, Readings
+from twin.physics.fillet import Fillet
+from twin.physics.grid import cell_centers
+from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
-
-@dataclass(frozen=True)
-class Snapshot:
-    """One sample of a run (all temperatures in K, powers as fractions of u_max)."""
-
-    j: int
-    t: float
-    eta: float
-    T_ref: float
-    T_mean_hat: float
-    field_hat: Array  # (N_y, N_x) estimate at the FD cell centres
-    field_true: Array  # (N_y, N_x) plant state (only a simulation has it)
-    tc: Array  # (4,) readings TC1..TC4
-    tc_hat: Array  # (4,) estimate at xi_1..xi_4
-    u: Array  # (6,) applied group powers
-    u_ff: Array  # (6,) feedforward part
-    inhomogeneity: float  # T_sup(t) of the estimate, K
-    true_mean: float
-    true_inhomogeneity: float
-    events: tuple[str, ...] = ()
+__all__ = ["ClosedLoop", "Snapshot"]
 
 
 @dataclass(frozen=True)
@@ -89,36 +75,15 @@ class _Pending:
     description: str
 
 
-@dataclass
-class _Series:
-    t: list[float] = field(default_factory=list)
-    eta: list[float] = field(default_factory=list)
-    T_ref: list[float] = field(default_factory=list)
-    T_mean_hat: list[float] = field(default_factory=list)
-    tc: list[Array] = field(default_factory=list)
-    tc_hat: list[Array] = field(default_factory=list)
-    u: list[Array] = field(default_factory=list)
-    u_ff: list[Array] = field(default_factory=list)
-    field_hat: list[Array] = field(default_factory=list)
-    field_true: list[Array] = field(default_factory=list)
-
-
-def oscillation_of(spec: OscillationSpec, t0: float = 0.0) -> Callable[[float], float]:
-    """eta(t) = A sin(2 pi (t - t0) / Pi) for an enabled spec, else eta = 0 (paper section 5.2)."""
-    if not spec.enabled or spec.amplitude == 0.0:
-        return lambda t: 0.0
-    a, w = spec.amplitude, 2.0 * math.pi / spec.period
-    return lambda t: a * math.sin(w * (t - t0))
-
-
 class ClosedLoop:
-    """Plant + TCs + EKF + feedforward/LQG for one scenario.
+    """A furnace + EKF + feedforward/LQG for one scenario.
 
     Parameters
     ----------
-    cfg : the furnace.
+    cfg : the furnace's configuration (the twin's model is built from it).
     scenario : the run (reference, duration, oscillation, TC4, mismatch, noise, seed).
-    radiation : a shared :class:`twin.radiation.RadiationModel` (loaded from the cache if None).
+    radiation : the twin's :class:`twin.radiation.RadiationModel` (loaded from the cache if None).
+    furnace : the furnace to run (default: the simulated furnace of the scenario, sharing ``radiation``).
     background : re-plan in a worker thread (backend) instead of inline (CLI, tests).
     plan_cache : shared between loops (the campaign): the initial plan of an identical start
         (same oscillation, reference and initial estimate) is solved once.
@@ -130,13 +95,12 @@ class ClosedLoop:
         scenario: Scenario,
         radiation: Any = None,
         *,
+        furnace: Furnace | None = None,
         background: bool = False,
         plan_cache: dict[Any, _Plan] | None = None,
     ) -> None:
         from twin.control.lqg import Controller
         from twin.estimation.ekf import Estimator
-        from twin.furnace.simulated.plant import Plant
-        from twin.furnace.simulated.thermocouples import Thermocouples
         from twin.radiation import radiation_model
 
         self.cfg = cfg
@@ -144,28 +108,26 @@ class ClosedLoop:
         self.t_s = cfg.sampling.t_s
         self.n_steps = int(round(scenario.duration / self.t_s))
         self.radiation: Any = radiation if radiation is not None else radiation_model(cfg)
-        self._rng = np.random.default_rng(scenario.seed)
+        if furnace is None:
+            from twin.furnace.simulated import SimulatedFurnace
+
+            furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
+        self.furnace: Furnace = furnace
         self._lock = threading.Lock()
         self._executor = ThreadPoolExecutor(max_workers=1) if background else None
         self._pending: _Pending | None = None
         self._events: list[str] = []
-
-        # --- the simulated furnace and its sensors (the "truth") ---
-        self.plant = Plant(cfg, self.radiation, scenario.mismatch)
-        positions = cfg.tc_positions(scenario.tc4)
-        self.tc_positions = np.asarray(positions)
-        self.thermocouples = Thermocouples(cfg, positions)
-        self._T = np.full(cfg.specimen.n_states, cfg.specimen.initial_temperature)
         self._oscillation = scenario.oscillation
-        self._eta_of_t = oscillation_of(scenario.oscillation)
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
-        y0 = self._read_tcs(0.0)
-        theta0 = np.full(self._fe_nodes(), float(np.mean(y0[:3])))
+        self._readings: Readings | None = furnace.read(0.0)
+        y0 = self._readings.for_estimator()
+        T0 = float(np.nanmean(y0)) if np.isfinite(y0).any() else float(cfg.specimen.initial_temperature)
+        theta0 = np.full(len(cfg.fe.x_nodes) * len(cfg.fe.y_nodes), T0)
         self._reference_spec: Reference = scenario.reference
         self._T_range = self._reachable_range()
-        self._set_ref_fn(self._make_reference(scenario.reference, float(np.mean(y0[:3])), t_start=0.0))
+        self._set_ref_fn(self._make_reference(scenario.reference, T0, t_start=0.0))
         key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes())
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
@@ -175,27 +137,24 @@ class ClosedLoop:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimator = Estimator(self._ctl.model, cfg, theta0)
-        self._y_next = y0
 
-        # --- output grid: FD cell centres ---
+        # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
-        self.x = (np.arange(s.nx) + 0.5) * s.length / s.nx
-        self.y = (np.arange(s.ny) + 0.5) * s.width / s.ny
-        # the fillet's cells in the flat field
-        self._fillet_idx = np.flatnonzero(fillet_mask(self.x, self.y, s.length, s.width).ravel())
+        self.x, self.y = cell_centers(cfg)
+        self.fillet = Fillet.of(cfg)
+        self.tc_positions = np.asarray(furnace.tc_positions, float)
         self._phi_tc = self._ctl.model.fe.phi(self.tc_positions)
-        self._series = _Series()
+        self._has_truth = furnace.true_field() is not None
+        header = RunHeader(
+            x=self.x, y=self.y, tc_positions=self.tc_positions, L_s=s.length, W_s=s.width,
+            t_E=float(scenario.reference.t_E), setpoint=float(scenario.reference.setpoint),
+            group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
+        )
+        self.record = RunRecord(header, has_truth=self._has_truth)
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 
     # ------------------------------------------------------------------ helpers
-    def _fe_nodes(self) -> int:
-        fe = self.cfg.fe
-        return len(fe.x_nodes) * len(fe.y_nodes)
-
-    def _read_tcs(self, t: float) -> Array:
-        return self.thermocouples.read(self._T, self._rng, self.scenario.tc_noise)
-
     def _set_ref_fn(self, ref_fn: Callable[[Any], Any]) -> None:
         """Install T_ref(t) and its values at every sample time (one vectorised call, not one per step)."""
         self._ref_fn = ref_fn
@@ -248,7 +207,7 @@ class ClosedLoop:
         with self._lock:
             t_now = self.j * self.t_s
             self._oscillation = spec
-            self._eta_of_t = oscillation_of(spec, t0=t_now)
+            self.furnace.set_oscillation(spec, t_now)
             self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s")
 
     def _start_replan(self, spec: OscillationSpec, description: str) -> None:
@@ -292,16 +251,17 @@ class ClosedLoop:
         return p is not None and not p.future.done()
 
     def step(self) -> Snapshot:
-        """Advance one sample; return the snapshot of sample j (before the plant moves on)."""
+        """Advance one sample; return the snapshot of sample j (before the furnace moves on)."""
         if self.done:
             raise StopIteration("run finished")
         with self._lock:
             self._poll_pending()
             j, t = self.j, self.j * self.t_s
-            eta = float(self._eta_of_t(t))
-            y = self._y_next  # TC1..TC4 at t_j
+            readings = self._readings if self._readings is not None else self.furnace.read(t)
+            self._readings = None
+            eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
-            state = self.estimator.update(y[:3])  # eq. 13 (faulty readings gated inside)
+            state = self.estimator.update(readings.for_estimator())  # eq. 13 (faulty readings gated inside)
             theta = state.theta
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
@@ -309,26 +269,26 @@ class ClosedLoop:
             T_ref = float(self._ref_samples[j])
 
             field_hat = ctl.model.fe.field_on_cells(theta)  # the cells are self.x, self.y
-            field_true = self._T.reshape(self.cfg.specimen.ny, self.cfg.specimen.nx).copy()
-            sup = float(sup_norm(field_hat.ravel(), T_ref, self._fillet_idx))
+            truth = self.furnace.true_field()
             events, self._events = tuple(self._events), []
             snap = Snapshot(
                 j=j, t=t, eta=eta, T_ref=T_ref, T_mean_hat=float(ctl.model.c_m @ theta),
-                field_hat=field_hat, field_true=field_true, tc=y.copy(), tc_hat=self._phi_tc @ theta,
-                u=np.asarray(u, float).copy(), u_ff=np.asarray(u_ff, float).copy(), inhomogeneity=sup,
-                true_mean=float(fillet_mean(self._T, self._fillet_idx)),
-                true_inhomogeneity=float(sup_norm(self._T, T_ref, self._fillet_idx)),
+                field_hat=field_hat, field_true=None if truth is None else truth.reshape(field_hat.shape),
+                tc=np.where(readings.usable, readings.values, np.nan), tc_hat=self._phi_tc @ theta,
+                u=np.asarray(u, float).copy(), u_ff=np.asarray(u_ff, float).copy(),
+                inhomogeneity=float(self.fillet.sup(field_hat, T_ref)),
+                true_mean=None if truth is None else float(self.fillet.mean(truth)),
+                true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events,
             )
-            self._record(snap)
+            self.record.append(snap)
 
-            # the furnace moves on with u held over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
-            self._T = self.plant.step(self._T, snap.u, t, self.t_s, self._eta_of_t)
+            # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
+            self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
             self.estimator.predict(snap.u)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
-            self._y_next = self._read_tcs(self.j * self.t_s)
             return snap
 
     def run(self) -> Iterator[Snapshot]:
@@ -338,77 +298,13 @@ class ClosedLoop:
     def close(self) -> None:
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
+        self.furnace.close()
 
     # ------------------------------------------------------------------ results
-    def _record(self, s: Snapshot) -> None:
-        r = self._series
-        r.t.append(s.t)
-        r.eta.append(s.eta)
-        r.T_ref.append(s.T_ref)
-        r.T_mean_hat.append(s.T_mean_hat)
-        r.tc.append(s.tc)
-        r.tc_hat.append(s.tc_hat)
-        r.u.append(s.u)
-        r.u_ff.append(s.u_ff)
-        r.field_hat.append(s.field_hat.astype(np.float32))
-        r.field_true.append(s.field_true.astype(np.float32))
-
-    @property
-    def t_E(self) -> float:
-        return float(self.scenario.reference.t_E)
-
-    @property
-    def setpoint(self) -> float:
-        return float(self.scenario.reference.setpoint)
-
     def timeseries(self) -> dict[str, Any]:
-        """Everything recorded so far, in the ``timeseries.npz`` layout of product.md."""
+        """Everything recorded so far, in the ``timeseries.npz`` layout of product.md (:mod:`twin.runs.record`)."""
         with self._lock:
-            r = self._series
-            n = len(r.t)
-            s = self.cfg.specimen
-            shape_f = (0, s.ny, s.nx)
-            return {
-                "t": np.asarray(r.t, float),
-                "eta": np.asarray(r.eta, float),
-                "T_ref": np.asarray(r.T_ref, float),
-                "T_mean_hat": np.asarray(r.T_mean_hat, float),
-                "tc": np.asarray(r.tc, float).reshape(n, 4),
-                "tc_hat": np.asarray(r.tc_hat, float).reshape(n, 4),
-                "u": np.asarray(r.u, float).reshape(n, -1) if n else np.zeros((0, self.cfg.n_groups)),
-                "u_ff": np.asarray(r.u_ff, float).reshape(n, -1) if n else np.zeros((0, self.cfg.n_groups)),
-                "t_field": np.asarray(r.t, float),
-                "field_hat": np.asarray(r.field_hat, np.float32) if n else np.zeros(shape_f, np.float32),
-                "field_true": np.asarray(r.field_true, np.float32) if n else np.zeros(shape_f, np.float32),
-                "x": self.x,
-                "y": self.y,
-                "tc_positions": self.tc_positions,
-                "L_s": s.length,
-                "W_s": s.width,
-                "t_E": self.t_E,
-                "setpoint": self.setpoint,
-                "group_names": np.asarray([g.name for g in self.cfg.lamps.groups]),
-                "scenario": self.scenario.to_json(),
-            }
+            return self.record.arrays()
 
     def metrics(self) -> dict[str, float]:
-        return compute_metrics(self.timeseries())
-
-
-def save_timeseries(path: Any, ts: Mapping[str, Any], *, compress: bool = True) -> None:
-    """Write a time series atomically (tmp file, fsync, rename): a reader or a crash never sees half a file.
-
-    ``compress=False`` for frequent rewrites of a growing run (the backend's flush every 2 s).
-    """
-    import os
-    from pathlib import Path
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp.npz")
-    save = np.savez_compressed if compress else np.savez
-    with open(tmp, "wb") as fh:
-        save(fh, **{k: np.asarray(v) for k, v in ts.items()})  # type: ignore[arg-type]
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, p)
+        return self.record.metrics()

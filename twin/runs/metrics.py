@@ -6,8 +6,11 @@ sup-norm (section 5.1)
 
     T_sup(t) = max over the fillet |T_hat(x, y, t) - T_ref(t)|,
 
-evaluated on the stored field grid, so that :func:`compute_metrics` applied to a
-saved ``timeseries.npz`` gives exactly the published ``metrics.json``.
+and the fillet mean the area integral over the fillet, both from
+:class:`twin.physics.fillet.Fillet` on the stored field grid, so that :func:`compute_metrics`
+applied to a saved ``timeseries.npz`` (:mod:`twin.runs.record`) gives exactly the published
+``metrics.json``.  A run without a true field (a real furnace) reports NaN (JSON null) for the
+``true_*`` and field-estimation metrics.
 
 Example
 -------
@@ -24,6 +27,8 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from twin.physics.fillet import Fillet
 
 Array = NDArray[np.float64]
 
@@ -51,27 +56,6 @@ def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_st
     return t >= t_E / 10 - eps
 
 
-def fillet_mask(x: Array, y: Array, L_s: float, W_s: float) -> NDArray[np.bool_]:
-    """(N_y, N_x) mask of grid points inside the fillet 0.25-0.75 L_s x 0.2-0.8 W_s (paper section 3.1)."""
-    X, Y = np.meshgrid(x, y)
-    return (X >= 0.25 * L_s) & (X <= 0.75 * L_s) & (Y >= 0.2 * W_s) & (Y <= 0.8 * W_s)
-
-
-def sup_norm(field: Array, T_ref: Array | float, mask: NDArray[np.bool_] | NDArray[np.intp]) -> Array:
-    """T_sup = max over the fillet |field - T_ref| for fields (m, N_y, N_x) -> (m,) in K.
-
-    ``mask`` is the fillet's boolean (N_y, N_x) mask, or its flat indices for flattened fields (m, N_s).
-    """
-    f = np.asarray(field, float)[..., mask]
-    ref = np.asarray(T_ref, float)
-    return np.max(np.abs(f - (ref[..., None] if ref.ndim else ref)), axis=-1)
-
-
-def fillet_mean(field: Array, mask: NDArray[np.bool_] | NDArray[np.intp]) -> Array:
-    """Mean of the field over the fillet grid points (K); ``mask`` as in :func:`sup_norm`."""
-    return np.asarray(field, float)[..., mask].mean(axis=-1)
-
-
 def _max(values: Array, sel: NDArray[np.bool_]) -> float:
     v = np.asarray(values, float)[sel]
     v = v[np.isfinite(v)]
@@ -87,8 +71,9 @@ def _mean(values: Array, sel: NDArray[np.bool_]) -> float:
 def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
     """The product.md metrics from a time-series mapping (the ``timeseries.npz`` layout).
 
-    Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, field_true,
-    x, y, L_s, W_s, t_E, setpoint``.  Windows without samples give NaN (a run stopped early).
+    Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, x, y, L_s, W_s,
+    t_E, setpoint`` and, for the ``true_*`` metrics, ``field_true``.  Windows without samples give
+    NaN (a run stopped early).
     """
     t = np.asarray(ts["t"], float)
     t_E = float(ts["t_E"])
@@ -102,14 +87,17 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
     tr, st, after = window(t, t_E, "transient"), window(t, t_E, "steady"), window(t, t_E, "after_start")
 
     tf = np.asarray(ts["t_field"], float)
-    mask = fillet_mask(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
+    fillet = Fillet.on_grid(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
     ref_f = np.interp(tf, t, T_ref) if t.size else np.zeros_like(tf)
     f_hat = np.asarray(ts["field_hat"], float)
-    f_true = np.asarray(ts["field_true"], float)
-    sup_hat = sup_norm(f_hat, ref_f, mask) / scale if tf.size else np.zeros(0)
-    sup_true = sup_norm(f_true, ref_f, mask) / scale if tf.size else np.zeros(0)
-    true_mean_err = np.abs(fillet_mean(f_true, mask) - ref_f) / scale if tf.size else np.zeros(0)
-    est_err = np.max(np.abs(f_hat - f_true)[..., mask], axis=-1) / scale if tf.size else np.zeros(0)
+    sup_hat = fillet.sup(f_hat, ref_f) / scale if tf.size else np.zeros(0)
+    if "field_true" in ts and tf.size:
+        f_true = np.asarray(ts["field_true"], float)
+        sup_true = fillet.sup(f_true, ref_f) / scale
+        true_mean_err = np.abs(fillet.mean(f_true) - ref_f) / scale
+        est_err = np.max(np.abs(f_hat - f_true)[..., fillet.mask], axis=-1) / scale
+    else:  # no truth (a real furnace), or no samples
+        sup_true = true_mean_err = est_err = np.full(tf.size, np.nan)
     trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")
 
     return {

@@ -116,7 +116,7 @@ def run_open_loop(
     dt = cfg.sampling.t_s
     n = int(round(duration / dt))
     every = max(1, int(round(field_every / dt)))
-    T = np.full(plant.n, cfg.specimen.initial_temperature)
+    state = plant.start(np.full(plant.n, cfg.specimen.initial_temperature), 0.0)
     t = np.arange(n + 1) * dt
     eta = np.array([eta_of_t(v) for v in t])
     u = np.empty((n + 1, plant.n_groups))
@@ -125,6 +125,7 @@ def run_open_loop(
     inh = np.empty(n + 1)
     t_field, fields = [], []
     for j in range(n + 1):
+        T = state.T
         u[j] = u_of_t(t[j])
         tc_true[j] = thermocouples.true_values(T)
         means[j] = plant.fillet_mean(T)
@@ -133,7 +134,7 @@ def run_open_loop(
             t_field.append(t[j])
             fields.append(plant.field(T))
         if j < n:
-            T = plant.step(T, u[j], t[j], dt, eta_of_t)
+            state = plant.advance(state, u[j], dt, eta_of_t)
     tc = tc_true + (noise * rng.standard_normal(tc_true.shape) if noise > 0 else 0.0)
     return OpenLoopRun(t, eta, u, tc, tc_true, means, inh, np.array(t_field), np.array(fields))
 

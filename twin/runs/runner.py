@@ -20,7 +20,8 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
-from twin.runs.loop import ClosedLoop, Snapshot, save_timeseries
+from twin.runs.loop import ClosedLoop
+from twin.runs.record import Snapshot, save_arrays
 from twin.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -84,12 +85,12 @@ def execute_run(
             for sink in sinks:
                 sink.add(snap)
             if snap.j % flush_every == 0 and snap.j > 0:
-                save_timeseries(out / "timeseries.npz", loop.timeseries())
+                loop.record.save(out / "timeseries.npz")
                 for sink in sinks:
                     sink.flush()
     finally:
         ts = loop.timeseries()
-        save_timeseries(out / "timeseries.npz", ts)
+        save_arrays(out / "timeseries.npz", ts)
         for sink in sinks:
             sink.close()
         loop.close()

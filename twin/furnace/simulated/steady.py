@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from twin.furnace.simulated.plant import Plant
-from twin.model.averaging import average_weights
+from twin.physics.motion import average_weights
 from twin.scenario import OscillationSpec
 
 log = logging.getLogger(__name__)
@@ -101,7 +101,7 @@ def uniform_scale(
         err = plant.fillet_mean(T) - T_mean
         if abs(err) < 1e-6:
             break
-        dmean = float(np.mean((plant.steady_sensitivity(T, w) @ d)[plant.fillet_mask]))
+        dmean = float(plant.fillet.mean(plant.steady_sensitivity(T, w) @ d))
         s -= err / dmean
         if s * float(d.max()) > 1.0:
             raise ValueError(f"T_mean = {T_mean} K needs more than u_max with this distribution")
@@ -138,7 +138,7 @@ def _steady_powers(
     start = uniform_scale(plant, T_mean, oscillation) if u0 is None else None
     x0 = np.clip(start.u if start is not None else np.asarray(u0, float), 0.0, 1.0)
     w = steady_weights(plant, oscillation)
-    mask = plant.fillet_mask
+    mask = plant.fillet_mask  # the cells of the closed fillet: their spread is minimised
     nf = int(mask.sum())
     cache: dict[str, Array] = {"T": start.T if start is not None else plant.steady_state(x0, w)}
 
@@ -149,12 +149,13 @@ def _steady_powers(
         return cache["T"]
 
     def residuals(u: Array) -> Array:
-        Tf = field(u)[mask]
-        return np.concatenate([(Tf - T_mean) / (T_mean * np.sqrt(nf)), [MEAN_WEIGHT * (Tf.mean() - T_mean) / T_mean]])
+        T = field(u)
+        spread = (T[mask] - T_mean) / (T_mean * np.sqrt(nf))
+        return np.concatenate([spread, [MEAN_WEIGHT * (plant.fillet_mean(T) - T_mean) / T_mean]])
 
     def jac(u: Array) -> Array:
-        S = plant.steady_sensitivity(field(u), w)[mask]  # (N_f, 6)
-        return np.vstack([S / (T_mean * np.sqrt(nf)), MEAN_WEIGHT * S.mean(axis=0) / T_mean])
+        S = plant.steady_sensitivity(field(u), w)  # (N_s, 6)
+        return np.vstack([S[mask] / (T_mean * np.sqrt(nf)), MEAN_WEIGHT * (plant.fillet.flat_weights @ S) / T_mean])
 
     sol = least_squares(residuals, x0, jac=jac, bounds=(0.0, 1.0), method="trf", xtol=1e-10, ftol=1e-12)
     u = np.clip(sol.x, 0.0, 1.0)
@@ -190,7 +191,7 @@ def periodic_inhomogeneity(
 ) -> PeriodicInhomogeneity:
     """Run the plant with eta(t) from T0 for ``periods`` periods; statistics of the last one.
 
-    The inhomogeneity at each sample is max over the fillet |T - fillet mean| / T_mean.
+    The inhomogeneity at each sample is max over the closed fillet's cells |T - fillet mean| / T_mean.
     """
     from twin.physics.motion import eta_function
 
@@ -198,13 +199,14 @@ def periodic_inhomogeneity(
     dt = plant.cfg.sampling.t_s
     n_period = int(round(oscillation.period / dt))
     v = np.asarray(u, float)
-    T = np.array(T0, float)
+    state = plant.start(T0, 0.0)
     inh, means = [], []
     for j in range(periods * n_period):
-        T = plant.step(T, v, j * dt, dt, eta)
+        state = plant.advance(state, v, dt, eta)
         if j >= (periods - 1) * n_period:
-            inh.append(plant.fillet_inhomogeneity(T) / T_mean)
-            means.append(plant.fillet_mean(T))
+            inh.append(plant.fillet_inhomogeneity(state.T) / T_mean)
+            means.append(plant.fillet_mean(state.T))
+    T = state.T
     return PeriodicInhomogeneity(
         max=float(np.max(inh)),
         mean=float(np.mean(inh)),

@@ -1,0 +1,87 @@
+"""The fillet (paper section 3.1) is defined once (twin.physics.fillet) and used everywhere.
+
+The fillet mean is the area integral of the cell field over 0.25-0.75 L_s x 0.2-0.8 W_s divided by
+its area, a border cell counting by its area inside (product.md).  The oracle below computes the
+area of every cell inside the fillet with explicit loops over the cells' corners, independently
+of the vectorised overlap in the code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twin.config import load_config, small_config
+from twin.furnace.simulated.plant import Plant
+from twin.model.fe import FEModel
+from twin.physics.fillet import Fillet
+from twin.runs.metrics import compute_metrics
+
+AGREE = 1e-9  # K: the same quantity computed by every user of the fillet (issue: "agree to 1e-9")
+
+
+def _oracle_mean(cfg, T: np.ndarray) -> float:
+    s = cfg.specimen
+    x0, x1, y0, y1 = 0.25 * s.length, 0.75 * s.length, 0.2 * s.width, 0.8 * s.width
+    dx, dy = s.length / s.nx, s.width / s.ny
+    total = area = 0.0
+    for j in range(s.ny):
+        for i in range(s.nx):
+            ax = max(0.0, min(x1, (i + 1) * dx) - max(x0, i * dx))
+            ay = max(0.0, min(y1, (j + 1) * dy) - max(y0, j * dy))
+            total += ax * ay * T[i + s.nx * j]
+            area += ax * ay
+    assert area == pytest.approx((x1 - x0) * (y1 - y0), rel=1e-12)
+    return total / area
+
+
+@pytest.mark.parametrize("cfg", [load_config(), small_config()], ids=["default", "small"])
+def test_every_user_of_the_fillet_mean_agrees_on_a_random_field(cfg) -> None:
+    rng = np.random.default_rng(7)
+    T = rng.uniform(300.0, 1300.0, cfg.specimen.n_states)
+    expected = _oracle_mean(cfg, T)
+    fillet = Fillet.of(cfg)
+    s = cfg.specimen
+    # the plant helpers (steady powers, open-loop runs)
+    assert Plant(cfg, None).fillet_mean(T) == pytest.approx(expected, abs=AGREE)
+    # the grid form and the flat form
+    assert fillet.mean(T.reshape(s.ny, s.nx)) == pytest.approx(expected, abs=AGREE)
+    # the run metrics, from a stored series whose true field is T and whose reference is 0 K (scale 1 K)
+    x, y = (np.arange(s.nx) + 0.5) * s.length / s.nx, (np.arange(s.ny) + 0.5) * s.width / s.ny
+    t = np.linspace(0.0, 2.0, 21)
+    ts = dict(t=t, T_ref=np.zeros_like(t), T_mean_hat=np.zeros_like(t), tc=np.zeros((21, 4)),
+              tc_hat=np.zeros((21, 4)), t_field=t, field_hat=np.zeros((21, s.ny, s.nx)),
+              field_true=np.broadcast_to(T.reshape(s.ny, s.nx), (21, s.ny, s.nx)), x=x, y=y,
+              L_s=s.length, W_s=s.width, t_E=1.0, setpoint=1.0)
+    assert compute_metrics(ts)["true_mean_error_steady_max"] == pytest.approx(abs(expected), abs=AGREE)
+    # the estimator's c_m: the same functional of the model's field on the cells
+    fe = FEModel(cfg)
+    theta = rng.uniform(300.0, 1300.0, fe.n)
+    assert fe.c_m @ theta == pytest.approx(_oracle_mean(cfg, fe.M_theta @ theta), abs=AGREE)
+    assert fe.fillet_mean(theta) == pytest.approx(fillet.mean(fe.field_on_cells(theta)), abs=AGREE)
+
+
+def test_cells_on_the_border_count_by_their_area_inside() -> None:
+    cfg = load_config()  # 26 x 17: the centres of cells 6 and 19 lie exactly on 0.25 / 0.75 L_s
+    fillet = Fillet.of(cfg)
+    w = fillet.weights / fillet.weights.max()
+    assert w[8, 6] == pytest.approx(0.5) and w[8, 19] == pytest.approx(0.5)  # half of the cell inside
+    assert w[3, 13] == pytest.approx(0.6) and w[13, 13] == pytest.approx(0.6)  # 0.2 W_s = 3.4 cells
+    assert w[2, 13] == 0.0 and w[8, 5] == 0.0
+    # T_sup takes the cells whose centres lie in the closed fillet: 14 columns (6..19) x 11 rows (3..13)
+    assert int(fillet.mask.sum()) == 154 and fillet.mask[8, 6] and fillet.mask[8, 19] and not fillet.mask[8, 20]
+
+
+def test_sup_and_spread() -> None:
+    cfg = small_config()
+    fillet = Fillet.of(cfg)
+    s = cfg.specimen
+    field = np.full((s.ny, s.nx), 1000.0)
+    field[8, 13] += 44.0  # a hot spot in the middle
+    field[0, 0] += 500.0  # outside the fillet: ignored
+    assert fillet.sup(field, 1000.0) == pytest.approx(44.0)
+    assert fillet.sup(np.stack([field, field - 10.0]), np.array([1000.0, 1000.0])).tolist() == pytest.approx(
+        [44.0, 34.0])
+    assert fillet.spread(field) == pytest.approx(44.0 - 44.0 * fillet.weights[8, 13], rel=1e-12)
+    with pytest.raises(ValueError, match="does not fit"):
+        fillet.mean(np.zeros((3, 3)))

@@ -1,0 +1,127 @@
+"""The furnace boundary: what the twin talks to (architecture.md, "a furnace and a twin").
+
+The loop (:mod:`twin.runs.loop`) sees a furnace only through :class:`Furnace`.  Per sample
+t_j = j t_s it
+
+1. reads the thermocouples of sample t_j (:meth:`Furnace.read`): a value, a source timestamp
+   and a status per TC;
+2. lets the estimator and the controller compute the group powers u_j;
+3. applies them (:meth:`Furnace.apply`): held until the next sample (zero-order hold).
+
+:meth:`Furnace.motion` reports the specimen's position and the drive's settings,
+:meth:`Furnace.set_oscillation` commands the drive.  A simulated furnace
+(:class:`twin.furnace.simulated.SimulatedFurnace`: plant, sensors, motion) also has a true
+field (:meth:`Furnace.true_field`); a real one (over OPC UA) returns ``None`` there, and
+everything downstream (metrics, stream, recording, both UIs) handles its absence.
+
+The twin's side (``twin.model``, ``twin.estimation``, ``twin.control``) never imports an
+implementation: it gets readings and gives powers.
+
+Example
+-------
+>>> import numpy as np
+>>> r = Readings(values=np.array([900.0, np.nan, 905.0, 910.0]), timestamps=np.zeros(4),
+...              status=("good", "missing", "good", "good"))
+>>> r.usable.tolist(), r.for_estimator().tolist()
+([True, False, True, True], [900.0, nan, 905.0])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.scenario import OscillationSpec
+
+Array = NDArray[np.float64]
+
+#: "good": a fresh reading of this sample; "bad": the sensor reports a fault (value not usable);
+#: "missing": no reading arrived for this sample (late or lost).
+TCStatus = Literal["good", "bad", "missing"]
+N_ESTIMATOR_TCS = 3  # TC1..TC3 feed the EKF; TC4 only validates (paper section 3.2)
+
+
+@dataclass(frozen=True)
+class Readings:
+    """The thermocouples TC1..TC4 of one sample.
+
+    Attributes
+    ----------
+    values : (4,) K; NaN where the status is not "good"
+    timestamps : (4,) s of run time at which each reading was taken (the source timestamp)
+    status : one :data:`TCStatus` per TC
+    """
+
+    values: Array
+    timestamps: Array
+    status: tuple[TCStatus, ...]
+
+    @property
+    def usable(self) -> NDArray[np.bool_]:
+        """Which readings carry a good, finite value."""
+        good = np.array([s == "good" for s in self.status])
+        return good & np.isfinite(self.values)
+
+    def for_estimator(self) -> Array:
+        """TC1..TC3 as the EKF takes them: NaN where a reading is not usable (it is then left out)."""
+        y = np.where(self.usable, self.values, np.nan)
+        return y[:N_ESTIMATOR_TCS]
+
+
+@dataclass(frozen=True)
+class Motion:
+    """The specimen's position and the drive's settings at one time.
+
+    eta(t) = amplitude sin(2 pi (t - since) / period) while ``oscillation.enabled``, else 0.
+    """
+
+    eta: float  # m
+    oscillation: OscillationSpec
+    since: float  # s of run time at which these settings took effect
+
+
+@runtime_checkable
+class Furnace(Protocol):
+    """A furnace the twin can run: read TCs, apply group powers, report and command the motion."""
+
+    @property
+    def kind(self) -> str:
+        """"simulated" or the kind of the connection (e.g. "opcua")."""
+        ...
+
+    @property
+    def t_s(self) -> float:
+        """The sample time (s) of reads and applies."""
+        ...
+
+    @property
+    def tc_positions(self) -> Array:
+        """(4, 2) absolute positions (m) of TC1..TC4 on the specimen."""
+        ...
+
+    def read(self, t: float) -> Readings:
+        """The readings of sample time ``t`` (s of run time)."""
+        ...
+
+    def apply(self, u: Array, t: float) -> None:
+        """Hold the group powers u (fractions of u_max, order of the furnace's groups) from ``t`` on."""
+        ...
+
+    def motion(self, t: float) -> Motion:
+        """The specimen position and drive settings at run time ``t``."""
+        ...
+
+    def set_oscillation(self, spec: OscillationSpec, t: float) -> None:
+        """Command the specimen drive from run time ``t`` on (the motion restarts at eta = 0)."""
+        ...
+
+    def true_field(self) -> Array | None:
+        """The true cell temperatures (N_s,) K at the last read sample; ``None`` if unknown (a real furnace)."""
+        ...
+
+    def close(self) -> None:
+        """Release the furnace (a real one: lamps commanded off where the link allows)."""
+        ...

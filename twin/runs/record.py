@@ -1,0 +1,240 @@
+"""The run record: one run's samples as a time series, with save and load (product.md, ``timeseries.npz``).
+
+A :class:`Snapshot` is one sample of a closed-loop run; a :class:`RunRecord` collects them in
+growing arrays and writes them in the ``timeseries.npz`` layout:
+
+* per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
+  ``u``, ``u_ff`` (n, 6) fractions of u_max;
+* fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
+  only when the furnace is a simulation (a real furnace has no true field);
+* events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
+* the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
+  ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
+
+This module is the only place that names these keys; the loop, the metrics, the figures, the
+backend's flushes and recovery and the 3D view read and write runs through it.
+
+Example
+-------
+>>> import numpy as np
+>>> rec = RunRecord(RunHeader(x=np.arange(3.0), y=np.arange(2.0), tc_positions=np.zeros((4, 2)), L_s=3.0,
+...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"))
+>>> rec.append(Snapshot(j=0, t=0.0, eta=0.0, T_ref=300.0, T_mean_hat=301.0, field_hat=np.zeros((2, 3)),
+...                     field_true=None, tc=np.zeros(4), tc_hat=np.zeros(4), u=np.zeros(1), u_ff=np.zeros(1),
+...                     inhomogeneity=1.0, true_mean=None, true_inhomogeneity=None, events=("started",)))
+>>> a = rec.arrays()
+>>> len(rec), a["T_mean_hat"].tolist(), "field_true" in a, a["event_text"].tolist()
+(1, [301.0], False, ['started'])
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+#: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
+SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
+FIELD_SERIES = ("field_hat", "field_true")
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """One sample of a run (all temperatures in K, powers as fractions of u_max).
+
+    ``field_true``, ``true_mean`` and ``true_inhomogeneity`` are ``None`` for a furnace without a
+    true field (a real one).
+    """
+
+    j: int
+    t: float
+    eta: float
+    T_ref: float
+    T_mean_hat: float
+    field_hat: Array  # (N_y, N_x) estimate at the FD cell centres
+    field_true: Array | None  # (N_y, N_x) the simulated furnace's state
+    tc: Array  # (4,) readings TC1..TC4 (NaN where a reading is missing)
+    tc_hat: Array  # (4,) estimate at xi_1..xi_4
+    u: Array  # (6,) applied group powers
+    u_ff: Array  # (6,) feedforward part
+    inhomogeneity: float  # T_sup(t) of the estimate, K
+    true_mean: float | None
+    true_inhomogeneity: float | None
+    events: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class StoredSnapshot(Snapshot):
+    """A :class:`Snapshot` read back from a saved run; ``has_field`` is False when the file held no
+    estimated field of the grid (the field is then the last fillet mean everywhere)."""
+
+    has_field: bool = True
+
+
+@dataclass(frozen=True)
+class RunHeader:
+    """What does not change during a run (the record's constants)."""
+
+    x: Array
+    y: Array
+    tc_positions: Array
+    L_s: float
+    W_s: float
+    t_E: float
+    setpoint: float
+    group_names: tuple[str, ...]
+    scenario: str
+
+    def arrays(self) -> dict[str, Any]:
+        out: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["group_names"] = np.asarray(self.group_names)
+        return out
+
+    @classmethod
+    def from_arrays(cls, a: Mapping[str, Any]) -> RunHeader:
+        return cls(
+            x=np.asarray(a["x"], float), y=np.asarray(a["y"], float),
+            tc_positions=np.asarray(a["tc_positions"], float).reshape(-1, 2) if "tc_positions" in a
+            else np.full((4, 2), np.nan),
+            L_s=float(a["L_s"]), W_s=float(a["W_s"]), t_E=float(a["t_E"]), setpoint=float(a["setpoint"]),
+            group_names=tuple(str(g) for g in np.asarray(a["group_names"]).ravel()) if "group_names" in a else (),
+            scenario=str(a["scenario"]) if "scenario" in a else "{}",
+        )
+
+
+class _Column:
+    """A growing array (amortised doubling), read without copying the unused tail."""
+
+    def __init__(self, shape: tuple[int, ...], dtype: Any) -> None:
+        self._data = np.empty((64, *shape), dtype)
+        self.n = 0
+
+    def append(self, value: Any) -> None:
+        if self.n == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self.n] = value
+        self.n += 1
+
+    def view(self) -> NDArray[Any]:
+        return self._data[: self.n]
+
+
+class RunRecord:
+    """The samples of one run so far (append), as the ``timeseries.npz`` arrays (:meth:`arrays`).
+
+    Parameters
+    ----------
+    header : the run's constants
+    has_truth : the furnace reports a true field (a simulation); otherwise ``field_true`` is absent
+    """
+
+    def __init__(self, header: RunHeader, *, has_truth: bool = True) -> None:
+        self.header = header
+        self.has_truth = has_truth
+        self._columns: dict[str, _Column] = {}
+        self._events: list[tuple[float, str]] = []
+
+    def __len__(self) -> int:
+        return self._columns["t"].n if self._columns else 0
+
+    def append(self, snap: Snapshot) -> None:
+        """Add one sample (its events too)."""
+        values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
+        values["field_hat"] = snap.field_hat
+        if self.has_truth:
+            if snap.field_true is None:
+                raise ValueError("this record keeps a true field, the snapshot has none")
+            values["field_true"] = snap.field_true
+        if not self._columns:
+            for k, v in values.items():
+                dtype = np.float32 if k in FIELD_SERIES else float
+                self._columns[k] = _Column(np.shape(v), dtype)
+        for k, v in values.items():
+            self._columns[k].append(v)
+        self._events.extend((float(snap.t), str(e)) for e in snap.events)
+
+    def arrays(self) -> dict[str, Any]:
+        """Everything recorded so far, in the ``timeseries.npz`` layout (copies)."""
+        h = self.header
+        out = h.arrays()
+        n_y, n_x = len(h.y), len(h.x)
+        for k in SAMPLE_SERIES:
+            col = self._columns.get(k)
+            out[k] = col.view().copy() if col is not None else np.zeros(0)
+        for k in FIELD_SERIES:
+            if k == "field_true" and not self.has_truth:
+                continue
+            col = self._columns.get(k)
+            out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
+        out["t_field"] = out["t"].copy()
+        out["event_t"] = np.asarray([t for t, _ in self._events], float)
+        out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
+        return out
+
+    def metrics(self) -> dict[str, float]:
+        """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
+        from twin.runs.metrics import compute_metrics
+
+        return compute_metrics(self.arrays())
+
+    def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> None:
+        """Write :meth:`arrays` atomically (see :func:`save_arrays`)."""
+        save_arrays(path, self.arrays(), compress=compress)
+
+
+def save_arrays(path: str | os.PathLike[str], arrays: Mapping[str, Any], *, compress: bool = True) -> None:
+    """Write a time series atomically (tmp file, fsync, rename): a reader or a crash never sees half a file.
+
+    ``compress=False`` for frequent rewrites of a growing run (the backend's flush every 2 s).
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".tmp.npz")
+    save = np.savez_compressed if compress else np.savez
+    with open(tmp, "wb") as fh:
+        save(fh, **{k: np.asarray(v) for k, v in arrays.items()})  # type: ignore[arg-type]
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, p)
+
+
+def load_arrays(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A saved time series as a dict of arrays (raises ``OSError`` / ``ValueError`` if unreadable)."""
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def last_snapshot(arrays: Mapping[str, Any]) -> StoredSnapshot | None:
+    """The last sample of a saved run as a :class:`StoredSnapshot` (``None`` if it has none).
+
+    Missing series (an older or partial file) become NaN; without a stored field the estimate
+    is the last fillet mean everywhere.
+    """
+    if "t" not in arrays or not len(arrays["t"]):
+        return None
+    h = RunHeader.from_arrays(arrays)
+    shape = (len(h.y), len(h.x))
+
+    def last(key: str, n: int | None = None) -> Any:
+        if key in arrays and len(arrays[key]):
+            return np.asarray(arrays[key][-1], dtype=float)
+        return np.full(n, np.nan) if n else float("nan")
+
+    T_mean = float(last("T_mean_hat"))
+    fh = arrays.get("field_hat")
+    field = np.asarray(fh[-1], float) if fh is not None and len(fh) and fh.shape[1:] == shape else None
+    ft = arrays.get("field_true")
+    truth = np.asarray(ft[-1], float) if ft is not None and len(ft) and ft.shape[1:] == shape else None
+    return StoredSnapshot(
+        j=len(arrays["t"]) - 1, t=float(last("t")), eta=float(np.nan_to_num(last("eta"))), T_ref=float(last("T_ref")),
+        T_mean_hat=T_mean, field_hat=field if field is not None else np.full(shape, T_mean), field_true=truth,
+        tc=last("tc", 4), tc_hat=last("tc_hat", 4), u=last("u", 6), u_ff=last("u_ff", 6),
+        inhomogeneity=float("nan"), true_mean=None, true_inhomogeneity=None, has_field=field is not None,
+    )
