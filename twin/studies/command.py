@@ -38,6 +38,7 @@ def study_command(cfg: FurnaceConfig, args: Any) -> int:
         print(f"furnace-twin study: {exc}", file=sys.stderr)  # noqa: T201
         return 2
     out = Path(args.out) if args.out else default_out(args.file)
+    _ensure_radiation_tables(furnace)
     try:
         summary = run_study(spec, furnace, out, furnace_name=name, workers=args.workers, scheduler=args.scheduler,
                             keep_series=args.keep_series, progress_bar=True, cases=cases)
@@ -55,3 +56,14 @@ def study_command(cfg: FurnaceConfig, args: Any) -> int:
                  len(summary["cases"]), summary["computed"], summary["skipped"], summary["failed"],
                  summary["workers"], summary["wall_s"], out / "study.md")
     return 0
+
+
+def _ensure_radiation_tables(cfg: FurnaceConfig) -> None:
+    """Ray-trace a missing radiation table here, with a progress bar, before the workers start: otherwise the
+    first case of every worker would wait on the cache lock in silence.  Workers on other machines use their
+    own cache (``FURNACE_TWIN_CACHE``)."""
+    from twin.radiation.cache import cache_path, load_or_compute
+
+    if not cache_path(cfg).exists():
+        log.info("radiation tables of this furnace are not cached yet: computing them once before the study")
+        load_or_compute(cfg, progress=True)

@@ -102,7 +102,8 @@ def run_study(
     finally:
         wall_s = time.perf_counter() - t0
         summary = _summary(cases, records, earlier, n_workers, wall_s, out, keep_series)
-        summary["timing"] = timing_figures(fresh, wall_s, n_workers)
+        summary["timing"] = timing_figures([records[k] for k in keys if k in records], wall_s, n_workers, fresh)
+        summary["invocations"] = log_invocation(out, summary)
         table = results_table(cases, records, spec.varied())
         summary["results"] = str(write_results(out, table)[0])
         try:
@@ -113,6 +114,25 @@ def run_study(
         write_report(out / "study.md", spec, furnace_name, summary)
         write_json(out / "summary.json", summary)
     return summary
+
+
+def log_invocation(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """Append this invocation to ``invocations.jsonl`` (a resumed study keeps the story of its runs); all of them."""
+    import json
+
+    entry = {"at": time.time(), "workers": summary["workers"], "computed": summary["computed"],
+             "skipped": summary["skipped"], "failed": summary["failed"], "pending": summary["pending"],
+             "wall_s": summary["wall_s"]}
+    path = out / "invocations.jsonl"
+    with open(path, "a") as fh:
+        fh.write(json.dumps(entry) + "\n")
+    entries = []
+    for line in path.read_text().splitlines():
+        try:
+            entries.append(json.loads(line))
+        except ValueError:  # a line cut by a crash
+            continue
+    return entries
 
 
 @contextmanager

@@ -7,6 +7,7 @@ samples, "best" is the grid point with the smallest median over the samples.
 from __future__ import annotations
 
 import json
+import time
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -25,8 +26,12 @@ def _pct(v: float | None) -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{100 * v:.2f} %"
 
 
+def _value(v: Any) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else json.dumps(v)
+
+
 def _params(p: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k} = {json.dumps(v)}" for k, v in p.items()) or "(base)"
+    return ", ".join(f"{k} = {_value(v)}" for k, v in p.items()) or "(base)"
 
 
 def _metric_keys(rows: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -84,8 +89,13 @@ def write_report(path: Path, spec: StudySpec, furnace: str, summary: Mapping[str
     lines = [f"# Study: {spec.name or path.parent.name}", ""]
     lines += [f"- furnace: `{furnace}`", f"- cases: {len(rows)} ({summary['computed']} computed now, "
               f"{summary['skipped']} found done earlier, {summary['failed']} failed, {summary['pending']} pending)",
-              f"- workers: {summary['workers']}, wall time {summary['wall_s']:.1f} s",
-              f"- results: `{Path(summary['results']).name}` (and `results.csv`)", ""]
+              f"- results: `{Path(summary['results']).name}` (and `results.csv`)"]
+    for i, inv in enumerate(summary.get("invocations") or [summary], 1):
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(inv["at"])) if "at" in inv else ""
+        lines.append(f"- invocation {i} {when}: {inv['computed']} cases computed ({inv['failed']} failed), "
+                     f"{inv['skipped']} found done, {inv['pending']} left pending; {inv['workers']} workers, "
+                     f"{inv['wall_s']:.1f} s")
+    lines.append("")
     lines += ["## What varies", ""]
     for p, values in spec.grid.items():
         lines.append(f"- grid `{p}`: {', '.join(json.dumps(v) for v in values)}")
@@ -107,6 +117,7 @@ def write_report(path: Path, spec: StudySpec, furnace: str, summary: Mapping[str
     lines.append("")
     if spec.monte_carlo is not None:
         lines += _percentile_section(spec, rows)
+        lines += _sensitivity_section(spec, rows)
     failed = [r for r in rows if r["status"] == "failed"]
     if failed:
         lines += ["## Failed cases", "", "| case | parameters | error |", "|---|---|---|"]
@@ -144,6 +155,48 @@ def _percentile_section(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> l
     return [*lines, ""]
 
 
+def sensitivities(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
+    """Spearman rank correlation of each metric with each numeric Monte Carlo field, over the finished
+    cases (with a grid: the mean of the correlations within each grid point)."""
+    from scipy.stats import spearmanr
+
+    if spec.monte_carlo is None:
+        return {}
+    done = _finished(rows)
+    groups: dict[str, list[Mapping[str, Any]]] = defaultdict(list)
+    for r in done:
+        groups[json.dumps({p: r["params"][p] for p in spec.grid}, sort_keys=True)].append(r)
+    fields = [f for f in spec.monte_carlo.fields
+              if all(isinstance(r["params"].get(f), (int, float)) and not isinstance(r["params"].get(f), bool)
+                     for r in done)]
+    out: dict[str, dict[str, float]] = {}
+    for m in _metric_keys(done):
+        for f in fields:
+            rhos = []
+            for members in groups.values():
+                pairs = [(r["params"][f], r["metrics"][m]) for r in members if r["metrics"].get(m) is not None]
+                if len(pairs) >= 3 and len({p[0] for p in pairs}) > 1 and len({p[1] for p in pairs}) > 1:
+                    rhos.append(float(spearmanr([p[0] for p in pairs], [p[1] for p in pairs]).statistic))
+            if rhos:
+                out.setdefault(m, {})[f] = float(np.mean(rhos))
+    return out
+
+
+def _sensitivity_section(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    table = sensitivities(spec, rows)
+    fields = sorted({f for v in table.values() for f in v}, key=list(spec.monte_carlo.fields).index) \
+        if spec.monte_carlo else []
+    if not fields:
+        return []
+    lines = ["## Which model error drives which metric", "",
+             "Spearman rank correlation over the samples (+1: the metric grows with the field; |rho| < 0.25 is "
+             "hardly distinguishable from none at n = 60)" + (", mean over the grid points" if spec.grid else "")
+             + ".", "", "| metric | " + " | ".join(f"`{f}`" for f in fields) + " |", "|---|" + "---|" * len(fields)]
+    for m, row in table.items():
+        lines.append(f"| {m} | " + " | ".join(f"{row[f]:+.2f}" if f in row else "n/a" for f in fields) + " |")
+    return [*lines, ""]
+
+
 def _timing_section(t: Mapping[str, Any]) -> list[str]:
     if not t.get("cases"):
         return []
@@ -151,10 +204,12 @@ def _timing_section(t: Mapping[str, Any]) -> list[str]:
     def s(v: Any, fmt: str = "{:.3f} s") -> str:
         return "n/a" if v is None else fmt.format(v)
 
-    return ["## Timing (cases computed in this invocation)", "",
+    return ["## Timing", "",
             f"- case (loop build with the feedforward OCP, samples, metrics): median {s(t['case_s'])}",
             f"- hand-off between cases on a worker: median {s(t['gap_s'])}, mean {s(t['gap_s_mean'])}",
             f"- set-up per case with the furnace cached: median {s(t['setup_s'])}; first case of a worker "
             f"(loads the radiation tables): median {s(t['load_s'])}",
-            f"- per-case overhead: {s(t['overhead_fraction'], '{:.2%}')} of a case; "
-            f"worker efficiency {s(t['efficiency'], '{:.0%}')} (busy / (wall x workers))", ""]
+            f"- per-case overhead (hand-off + cached set-up): {s(t['overhead_fraction'], '{:.2%}')} of a case",
+            f"- this invocation: {t['computed']} cases on {t['workers']} workers in {t['wall_s']:.1f} s, worker "
+            f"efficiency {s(t['efficiency'], '{:.0%}')} (busy / (wall x workers), cluster start-up included)", ""]
+
