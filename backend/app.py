@@ -1,9 +1,11 @@
 """The FastAPI app factory: REST API, websocket stream, dashboard page, optional viser view.
 
->>> from backend.app import create_app
+>>> import tempfile
 >>> from backend.settings import Settings
-from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
->>> app = create_app(Settings(data_dir="/tmp/furnace-doc"))  # doctest: +SKIP
+>>> from twin.config import small_config
+>>> app = create_app(Settings(data_dir=tempfile.mkdtemp()), small_config())
+>>> sorted(set(app.openapi()["paths"]) & {"/api/runs", "/api/health"})
+['/api/health', '/api/runs']
 """
 
 from __future__ import annotations

@@ -8,15 +8,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-TEST_RADIATION_CACHE = REPO / ".cache" / "test-radiation"
-
-# set at import so that subprocesses and module-level code see it too
-os.environ["FURNACE_TWIN_CACHE"] = str(TEST_RADIATION_CACHE)
-# The suite runs on 2 shared cores with 2 xdist workers: multi-threaded BLAS only contends
-# (a 442 x 442 solve took 10x longer with threads under load).  The environment variables
-# work if numpy is not imported yet; the fixture below limits already-loaded libraries.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+TEST_RADIATION_CACHE = REPO / ".cache" / "test-radiation"  # also set for the whole session in ../conftest.py
 
 
 @pytest.fixture(scope="session", autouse=True)

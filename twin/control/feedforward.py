@@ -45,9 +45,17 @@ IPOPT's status and iteration count are reported in the plan; a failed solve rais
 
 Example
 -------
->>> plan = solve_feedforward(model, theta0, 0.0, ref, cfg)   # doctest: +SKIP
->>> plan.status, plan.u_ff.shape                              # doctest: +SKIP
-('Solve_Succeeded', (1440, 6))
+>>> from twin.config import small_config
+>>> from twin.control.reference import reference_trajectory
+>>> from twin.model.discrete import discrete_model
+>>> from twin.radiation import radiation_model
+>>> from twin.scenario import TransitionReference
+>>> cfg = small_config()
+>>> model = discrete_model(cfg, radiation_model(cfg))
+>>> ref = reference_trajectory(TransitionReference(setpoint=800.0, t_E=20.0), 300.0)
+>>> plan = solve_feedforward(model, np.full(model.n, 300.0), 0.0, ref, cfg)
+>>> plan.success, plan.u_ff.shape[1], bool(plan.max_mean_error < 5.0)   # K
+(True, 6, True)
 """
 
 from __future__ import annotations

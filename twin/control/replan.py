@@ -10,8 +10,20 @@ then swaps the plan in and keeps the integrator state e_I.
 
 Example
 -------
->>> plan, gains = replan(model, cfg, theta_hat, 60.0, new_ref, previous_plan)   # doctest: +SKIP
->>> controller = controller.with_plan(plan, gains)                              # doctest: +SKIP
+>>> from twin.config import small_config
+>>> from twin.control.reference import reference_trajectory
+>>> from twin.model.discrete import discrete_model
+>>> from twin.radiation import radiation_model
+>>> from twin.scenario import TransitionReference
+>>> cfg = small_config()
+>>> model = discrete_model(cfg, radiation_model(cfg))
+>>> first = reference_trajectory(TransitionReference(setpoint=800.0, t_E=20.0), 300.0)
+>>> plan, gains = replan(model, cfg, np.full(model.n, 300.0), 0.0, first)
+>>> new_ref = reference_trajectory(TransitionReference(setpoint=700.0, t_E=10.0), 600.0, t_start=10.0)
+>>> theta_hat = plan.theta_ref[plan.index_at(10.0)]
+>>> plan2, gains2 = replan(model, cfg, theta_hat, 10.0, new_ref, plan)   # warm-started from the first plan
+>>> plan2.t0, plan2.success, gains2.K.shape[1:]
+(10.0, True, (6, 106))
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ Example
 -------
 >>> from twin.config import small_config
 >>> from twin.radiation import radiation_model
->>> model = discrete_model(small_config(), radiation_model(small_config()), None)  # doctest: +SKIP
->>> model.step(300.0 * np.ones(model.n), np.full(6, 0.5)).shape  # doctest: +SKIP
+>>> model = discrete_model(small_config(), radiation_model(small_config()), None)
+>>> model.step(300.0 * np.ones(model.n), np.full(6, 0.5)).shape
 (105,)
 """
 

@@ -34,8 +34,9 @@ The quartz window is IR-transparent: it is returned by :func:`display_meshes` on
 Example
 -------
 >>> from twin.config import small_config
->>> g = furnace_geometry(small_config(), 0.0)
->>> g.n_surfaces == 2 * 442 + len(g.wall_names) + 34
+>>> cfg = small_config()
+>>> g = furnace_geometry(cfg, 0.0)   # specimen front and back cells, walls, lamps
+>>> g.n_surfaces == 2 * cfg.specimen.n_states + len(g.wall_names) + cfg.lamps.n_lamps
 True
 """
 

@@ -34,7 +34,7 @@ Example
 >>> enc = build_enclosure([(0, *a), (1, *b)], np.zeros(2))
 >>> F, stats = trace_exchange_factors(enc, np.array([20000, 10]), max_bounces=0,
 ...                                   min_weight=0.01, rng=np.random.default_rng(1))
->>> abs(F[0, 1] - 0.1998) < 0.01   # Howell C-11, unit squares at unit distance
+>>> bool(abs(F[0, 1] - 0.1998) < 0.01)   # Howell C-11, unit squares at unit distance
 True
 """
 

@@ -18,7 +18,8 @@ Example
 -------
 >>> import numpy as np
 >>> rec = RunRecord(RunHeader(x=np.arange(3.0), y=np.arange(2.0), tc_positions=np.zeros((4, 2)), L_s=3.0,
-...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"))
+...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"),
+...                 has_truth=False)   # e.g. a real furnace
 >>> rec.append(Snapshot(j=0, t=0.0, eta=0.0, T_ref=300.0, T_mean_hat=301.0, field_hat=np.zeros((2, 3)),
 ...                     field_true=None, tc=np.zeros(4), tc_hat=np.zeros(4), u=np.zeros(1), u_ff=np.zeros(1),
 ...                     inhomogeneity=1.0, true_mean=None, true_inhomogeneity=None, events=("started",)))

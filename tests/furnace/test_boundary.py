@@ -1,0 +1,117 @@
+"""The furnace boundary (twin.furnace.interface): the loop talks to *a furnace*, the twin side never to
+the simulated one, and a furnace without a true field or with missing readings runs the same loop."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from twin.config import small_config
+from twin.furnace.interface import Furnace, Readings
+from twin.furnace.simulated import SimulatedFurnace
+from twin.runs.loop import ClosedLoop
+from twin.scenario import Scenario
+
+TWIN_SIDE = ("twin.model.discrete", "twin.model.averaging", "twin.estimation.ekf", "twin.control.feedforward",
+             "twin.control.lqg", "twin.control.replan", "twin.control.reference")
+
+
+def test_the_twin_side_never_imports_the_simulated_furnace() -> None:
+    code = ("import importlib, json, sys\n"
+            f"for m in {TWIN_SIDE!r}: importlib.import_module(m)\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('twin.furnace'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = json.loads(out.strip().splitlines()[-1])
+    assert not [m for m in loaded if m.startswith("twin.furnace.simulated")], loaded
+
+
+class _RealLike:
+    """A furnace as a real one looks to the loop: no true field, TC2 lost from 1 s on."""
+
+    kind = "test"
+
+    def __init__(self, inner: SimulatedFurnace) -> None:
+        self.inner = inner
+        self.t_s, self.tc_positions = inner.t_s, inner.tc_positions
+
+    def read(self, t: float) -> Readings:
+        r = self.inner.read(t)
+        if t < 1.0 - 1e-9:
+            return r
+        values = r.values.copy()
+        values[1] = np.nan
+        return Readings(values, r.timestamps, ("good", "missing", "good", "good"))
+
+    def apply(self, u, t):
+        self.inner.apply(u, t)
+
+    def motion(self, t):
+        return self.inner.motion(t)
+
+    def set_oscillation(self, spec, t):
+        self.inner.set_oscillation(spec, t)
+
+    def true_field(self):
+        return None
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+@pytest.fixture(scope="module")
+def truthless_run(small_radiation):
+    cfg = small_config()
+    scenario = Scenario.model_validate({"reference": {"setpoint": 700.0, "t_E": 4.0}, "duration": 8.0})
+    furnace = _RealLike(SimulatedFurnace.for_scenario(cfg, scenario, small_radiation))
+    assert isinstance(furnace, Furnace)  # the protocol is all the loop needs
+    loop = ClosedLoop(cfg, scenario, small_radiation, furnace=furnace)
+    snaps = list(loop.run())
+    return loop, snaps
+
+
+def test_a_furnace_without_truth_records_none_and_null_metrics(truthless_run) -> None:
+    loop, snaps = truthless_run
+    assert all(s.field_true is None and s.true_mean is None and s.true_inhomogeneity is None for s in snaps)
+    arrays = loop.timeseries()
+    assert "field_true" not in arrays and arrays["field_hat"].shape[0] == len(snaps)
+    m = loop.metrics()
+    for key in ("true_inhomogeneity_steady", "true_mean_error_steady_max", "field_estimation_error_steady_max"):
+        assert np.isnan(m[key]), key
+    assert np.isfinite(m["mean_error_transient_max"]) and np.isfinite(m["tc4_error_steady_max"])
+
+
+def test_missing_readings_are_recorded_as_nan_and_left_out_of_the_update(truthless_run) -> None:
+    loop, snaps = truthless_run
+    lost = [s for s in snaps if s.t >= 1.0 - 1e-9]
+    assert lost and all(np.isnan(s.tc[1]) and np.isfinite(s.tc[[0, 2, 3]]).all() for s in lost)
+    assert not loop.estimator.last_info.used[1] and loop.estimator.last_info.used[[0, 2]].all()
+    # the run still tracks its reference with two TCs (the mean error stays within a few kelvin)
+    assert abs(snaps[-1].T_mean_hat - snaps[-1].T_ref) < 20.0
+
+
+def test_the_simulated_furnace_keeps_its_own_clock(small_radiation) -> None:
+    cfg = small_config()
+    f = SimulatedFurnace(cfg, small_radiation, tc_noise=0.0)
+    f.read(0.0)
+    with pytest.raises(ValueError, match="simulated furnace is at t = 0"):
+        f.apply(np.zeros(6), 0.1)  # a sample skipped
+    f.apply(np.full(6, 1.0), 0.0)
+    assert f.time == pytest.approx(0.1)
+    assert f.read(0.1).values.min() > 300.0  # full power for one sample heats the plate
+    with pytest.raises(ValueError, match="read at t = 0.05"):
+        f.read(0.05)
+
+
+def test_loop_and_furnace_agree_on_the_motion(small_radiation) -> None:
+    cfg = small_config()
+    scenario = Scenario.model_validate({"reference": {"setpoint": 600.0, "t_E": 4.0}, "duration": 2.0,
+                                        "oscillation": {"enabled": True, "amplitude": 0.02, "period": 2.0}})
+    loop = ClosedLoop(cfg, scenario, small_radiation)
+    snaps = list(loop.run())
+    expected = [0.02 * np.sin(2 * np.pi * s.t / 2.0) for s in snaps]
+    np.testing.assert_allclose([s.eta for s in snaps], expected, atol=1e-12)
+    assert loop.furnace.motion(0.5).oscillation.enabled
