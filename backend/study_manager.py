@@ -112,7 +112,7 @@ class StudyManager:
         s = self.settings
         try:
             check_paths(spec)
-            name, cfg = resolve_furnace(spec, self.cfg, allow_paths=False)
+            name, cfg = resolve_furnace(spec, self.cfg, default_name="(the server's furnace)", allow_paths=False)
             if spec.n_cases > s.max_study_cases:
                 raise StudyError(f"{spec.n_cases} cases: this server runs at most {s.max_study_cases} per study")
             cases = expand(spec, cfg)

@@ -108,12 +108,13 @@ def check_furnace_limits(scenario: Scenario, cfg: FurnaceConfig, where: str) -> 
 
 
 def resolve_furnace(
-    spec: StudySpec, default: FurnaceConfig, *, relative_to: Path | None = None, allow_paths: bool = True
+    spec: StudySpec, default: FurnaceConfig, *, default_name: str = "default", relative_to: Path | None = None,
+    allow_paths: bool = True,
 ) -> tuple[str, FurnaceConfig]:
-    """The study's furnace (name, config): ``default`` when the study names none, else a shipped furnace, or
-    (``allow_paths``) a TOML path, relative to the study file's folder."""
+    """The study's furnace (name, config): ``default`` (called ``default_name``) when the study names none,
+    else a shipped furnace, or (``allow_paths``) a TOML path, relative to the study file's folder."""
     if spec.furnace is None:
-        return "(running furnace)", default
+        return default_name, default
     name = spec.furnace
     if name not in SHIPPED_FURNACES:
         if not allow_paths:

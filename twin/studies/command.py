@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
-from twin.config import FurnaceConfig
+from twin.config import CONFIG_ENV_VAR, FurnaceConfig
 from twin.studies.cases import expand, resolve_furnace
 from twin.studies.cluster import ClusterError
 from twin.studies.spec import StudyError, load_study
@@ -32,7 +33,9 @@ def study_command(cfg: FurnaceConfig, args: Any) -> int:
 
     try:
         spec = load_study(args.file)
-        name, furnace = resolve_furnace(spec, cfg, relative_to=Path(args.file).resolve().parent)
+        default_name = getattr(args, "config", None) or os.environ.get(CONFIG_ENV_VAR) or "default"
+        name, furnace = resolve_furnace(spec, cfg, default_name=default_name,
+                                        relative_to=Path(args.file).resolve().parent)
         cases = expand(spec, furnace)
     except StudyError as exc:
         print(f"furnace-twin study: {exc}", file=sys.stderr)  # noqa: T201
