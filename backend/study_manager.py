@@ -22,9 +22,10 @@ from typing import Any
 
 from backend.settings import Settings
 from twin.config import FurnaceConfig
+from twin.limits import scenario_limits
 from twin.studies.cases import Case, expand, resolve_furnace
 from twin.studies.engine import StudyProgress
-from twin.studies.spec import StudyError, StudySpec, check_paths
+from twin.studies.spec import StudyError, StudySpec
 from twin.studies.store import write_json
 
 log = logging.getLogger(__name__)
@@ -72,8 +73,9 @@ def _default_runner(*args: Any, **kwargs: Any) -> dict[str, Any]:
 
 
 class StudyManager:
-    def __init__(self, settings: Settings, cfg: FurnaceConfig, runner: StudyRunner | None = None) -> None:
-        self.settings, self.cfg = settings, cfg
+    def __init__(self, settings: Settings, cfg: FurnaceConfig, runner: StudyRunner | None = None, *,
+                 furnace_name: str = "custom") -> None:
+        self.settings, self.cfg, self.furnace_name = settings, cfg, furnace_name
         self.root = settings.studies_dir
         self.runner = runner or _default_runner
         self._lock = threading.Lock()
@@ -111,16 +113,16 @@ class StudyManager:
         """The study's furnace and cases, or :class:`StudyRejected` saying what is wrong."""
         s = self.settings
         try:
-            check_paths(spec)
-            name, cfg = resolve_furnace(spec, self.cfg, default_name="(the server's furnace)", allow_paths=False)
             if spec.n_cases > s.max_study_cases:
                 raise StudyError(f"{spec.n_cases} cases: this server runs at most {s.max_study_cases} per study")
-            cases = expand(spec, cfg)
+            name, cfg = resolve_furnace(spec, self.cfg, default_name=self.furnace_name, allow_paths=False)
+            cases = expand(spec, cfg, scenario_limits(cfg, name))
         except StudyError as exc:
             raise StudyRejected(str(exc)) from None
-        longest = max(c.scenario.duration for c in cases)
-        if longest > s.max_duration_s:
-            raise StudyRejected(f"duration: {longest:g} s exceeds this server's limit of {s.max_duration_s:g} s")
+        longest = max(cases, key=lambda c: c.scenario.duration)
+        if longest.scenario.duration > s.max_duration_s:  # the scenario checks the twin's limit, not the server's
+            raise StudyRejected(f"case {longest.index}: duration: {longest.scenario.duration:g} s exceeds this "
+                                f"server's limit of {s.max_duration_s:g} s")
         return name, cfg, cases
 
     def submit(self, spec: StudySpec) -> StudyState:

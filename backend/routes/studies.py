@@ -4,24 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, status
+from fastapi import APIRouter, Body, HTTPException, Query, status
 from fastapi.responses import FileResponse
 
-from backend.deps import TokenDep
+from backend.deps import StudiesDep, TokenDep
 from backend.schemas import StudyDetail, StudyLinks, StudySummary
-from backend.study_manager import STUDY_FILES, StudyManager, StudyNotFound, StudyState
+from backend.study_manager import STUDY_FILES, StudyNotFound, StudyState
 from twin.studies.report import best_cases, percentiles
 from twin.studies.spec import StudySpec
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
-
-
-def get_studies(request: Request) -> StudyManager:
-    manager: StudyManager = request.app.state.studies
-    return manager
-
-
-StudiesDep = Annotated[StudyManager, Depends(get_studies)]
 
 
 def links(study_id: str) -> StudyLinks:

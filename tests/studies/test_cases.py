@@ -20,7 +20,7 @@ def cfg():
 
 
 def _study(**kw):
-    doc = {"base": {"oscillation": {"enabled": True}},
+    doc: dict = {"base": {"oscillation": {"enabled": True}},
            "grid": {"oscillation.period": [6.0, 12.0, 18.0], "oscillation.amplitude": [0.016, 0.032]},
            "monte_carlo": {"n": 4, "seed": 1, "mismatch.alpha": UNIFORM, "mismatch.emissivity": NORMAL}}
     doc.update(kw)
@@ -116,18 +116,22 @@ def test_integers_include_both_ends():
         ({"grid": {"tc_noise": [1.0]}, "colour": "red"}, "colour"),
     ],
 )
-def test_bad_studies_name_the_problem(doc, needle):
+def test_bad_studies_name_the_problem(doc, needle, cfg):
     with pytest.raises(StudyError) as exc:
-        parse_study(doc)
+        expand(parse_study(doc), cfg)  # the structure is checked on parsing, the paths with the furnace
     assert needle in str(exc.value)
 
 
-def test_amplitude_over_the_furnace_eta_max_is_refused(cfg):
+def test_the_furnace_limits_and_defaults_apply(cfg):
     spec = parse_study({"base": {"oscillation": {"enabled": True}}, "grid": {"oscillation.amplitude": [0.02, 0.04]}})
     narrow = cfg.with_overrides({"oscillation.eta_max": 0.03})
     assert len(expand(spec, cfg)) == 2
-    with pytest.raises(StudyError, match="eta_max"):
+    with pytest.raises(StudyError, match=r"'oscillation.amplitude' = 0.04: .*eta_max of furnace"):
         expand(spec, narrow)
+    # a field the study leaves out takes the furnace's default: the amplitude 3 L_h capped at eta_max
+    periods = expand(parse_study({"base": {"oscillation": {"enabled": True}}, "grid": {"oscillation.period": [9.0]}}),
+                     narrow)
+    assert periods[0].scenario.oscillation.amplitude == 0.03
 
 
 def test_monte_carlo_values_out_of_a_fields_range_are_refused(cfg):

@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from twin.config import SHIPPED_FURNACES, ConfigError, FurnaceConfig, load_config
+from twin.limits import ScenarioLimits, scenario_limits
 from twin.scenario import Scenario
-from twin.studies.spec import MonteCarlo, StudyError, StudySpec, parse_study, scenario_of, set_path
+from twin.studies.spec import MonteCarlo, StudyError, StudySpec, check_paths, parse_study, scenario_of, set_path
 
 __all__ = ["Case", "case_key", "expand", "grid_points", "mc_samples", "parse_study", "resolve_furnace"]
 
@@ -76,11 +77,14 @@ def mc_samples(mc: MonteCarlo | None) -> list[dict[str, Any]]:
     return [{p: col[i] for p, col in columns.items()} for i in range(mc.n)]
 
 
-def expand(spec: StudySpec, cfg: FurnaceConfig) -> list[Case]:
-    """Every case of the study on ``cfg``, validated (scenario schema and the furnace's limits).
+def expand(spec: StudySpec, cfg: FurnaceConfig, limits: ScenarioLimits | None = None) -> list[Case]:
+    """Every case of the study on ``cfg``, validated against the scenario schema and the furnace's ``limits``
+    (default ``scenario_limits(cfg)``); fields the study leaves out take the furnace's defaults.
 
-    Raises :class:`StudyError` naming the first invalid case and why.
+    Raises :class:`StudyError` naming each bad path or value, or the first invalid case and why.
     """
+    limits = limits or scenario_limits(cfg)
+    check_paths(spec, limits)
     digest = cfg.digest()
     points = grid_points(spec.grid)
     samples = mc_samples(spec.monte_carlo)
@@ -92,19 +96,10 @@ def expand(spec: StudySpec, cfg: FurnaceConfig) -> list[Case]:
         for path, value in params.items():
             set_path(data, path, value)
         where = f"case {index} ({', '.join(f'{p} = {v!r}' for p, v in params.items())})"
-        scenario = scenario_of(data, where)
-        check_furnace_limits(scenario, cfg, where)
+        scenario = scenario_of(data, where, limits)
         cases.append(Case(index, case_key(digest, scenario), params, scenario,
                           g if has_grid else None, s if has_mc else None))
     return cases
-
-
-def check_furnace_limits(scenario: Scenario, cfg: FurnaceConfig, where: str) -> None:
-    """Limits that come from the furnace (product.md): the oscillation amplitude at most its eta_max."""
-    eta_max = cfg.oscillation.eta_max
-    if scenario.oscillation.enabled and scenario.oscillation.amplitude > eta_max + 1e-12:
-        raise StudyError(f"{where}: oscillation.amplitude {scenario.oscillation.amplitude:g} m exceeds "
-                         f"this furnace's eta_max of {eta_max:g} m")
 
 
 def resolve_furnace(

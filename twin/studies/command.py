@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import CONFIG_ENV_VAR, FurnaceConfig
+from twin.limits import furnace_name, scenario_limits
 from twin.studies.cases import expand, resolve_furnace
 from twin.studies.cluster import ClusterError
 from twin.studies.spec import StudyError, load_study
@@ -33,10 +34,10 @@ def study_command(cfg: FurnaceConfig, args: Any) -> int:
 
     try:
         spec = load_study(args.file)
-        default_name = getattr(args, "config", None) or os.environ.get(CONFIG_ENV_VAR) or "default"
-        name, furnace = resolve_furnace(spec, cfg, default_name=default_name,
+        source = getattr(args, "config", None) or os.environ.get(CONFIG_ENV_VAR)
+        name, furnace = resolve_furnace(spec, cfg, default_name=furnace_name(cfg, source),
                                         relative_to=Path(args.file).resolve().parent)
-        cases = expand(spec, furnace)
+        cases = expand(spec, furnace, scenario_limits(furnace, name))
     except StudyError as exc:
         print(f"furnace-twin study: {exc}", file=sys.stderr)  # noqa: T201
         return 2

@@ -15,9 +15,10 @@ The same document is the TOML file of ``furnace-twin study FILE.toml`` and the J
     seeds = "per_sample"                # each sample its own TC-noise seed (default), or "base"
     "mismatch.alpha" = {dist = "uniform", low = -0.3, high = 0.3}
 
-Everything that can be checked without the furnace is checked here; :func:`twin.studies.cases.expand`
-validates every case's scenario and the furnace's limits.  Errors are :class:`StudyError` with one line
-per problem that names the key.
+:func:`parse_study` checks the document's structure; :func:`check_paths` (called by
+:func:`twin.studies.cases.expand`, which knows the furnace) checks every field path and grid value against
+the scenario schema and the furnace's limits (``twin.limits``).  Errors are :class:`StudyError` with one
+line per problem that names the key.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from twin.scenario import Scenario
+from twin.limits import ScenarioLimits
+from twin.scenario import Scenario, parse_scenario
 from twin.studies.distributions import Distribution
 
 #: the most cases one study may expand to (a typo like n = 5000000 is refused, not attempted)
@@ -153,32 +155,34 @@ def format_errors(exc: ValidationError, prefix: str = "") -> list[str]:
     return lines
 
 
-def scenario_of(data: dict[str, Any], where: str) -> Scenario:
-    """Validate a scenario document; a :class:`StudyError` names ``where`` and the fields."""
+def scenario_of(data: dict[str, Any], where: str, limits: ScenarioLimits | None = None) -> Scenario:
+    """Validate a scenario document against a furnace's ``limits`` (default: the default furnace's); fields
+    left out take that furnace's defaults.  A :class:`StudyError` names ``where`` and the fields."""
     try:
-        return Scenario.model_validate(data)
+        return parse_scenario(data, limits)
     except ValidationError as exc:
         raise StudyError(f"{where}: " + "; ".join(format_errors(exc))) from None
 
 
 def parse_study(doc: Any) -> StudySpec:
-    """Validate a study document (parsed TOML or a JSON body); checks paths against the scenario schema."""
+    """Validate a study document's structure (parsed TOML or a JSON body); the paths are checked by
+    :func:`check_paths` once the furnace is known."""
     if not isinstance(doc, dict):
         raise StudyError("a study must be a table / JSON object")
     try:
         spec = StudySpec.model_validate(doc)
     except ValidationError as exc:
         raise StudyError("invalid study:\n  " + "\n  ".join(format_errors(exc))) from None
-    check_paths(spec)
     return spec
 
 
-def check_paths(spec: StudySpec) -> None:
-    """Every path names a scenario field and every grid value is valid there (each checked on its own)."""
+def check_paths(spec: StudySpec, limits: ScenarioLimits | None = None) -> None:
+    """Every path names a scenario field and every grid value is valid there for a furnace's ``limits``
+    (each value checked on its own, so each problem is named once)."""
     problems: list[str] = []
     for where, data in _probes(spec):
         try:
-            scenario_of(data, where)
+            scenario_of(data, where, limits)
         except StudyError as exc:
             problems.append(str(exc))
     if problems:
@@ -230,4 +234,4 @@ def load_study(path: str | Path) -> StudySpec:
     try:
         return parse_study(doc)
     except StudyError as exc:
-        raise StudyError(f"study {p}: {exc}") from None
+        raise StudyError(f"study {p}: {exc}") from None  # paths: checked with the furnace (cases.expand)

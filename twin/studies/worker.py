@@ -30,7 +30,7 @@ from twin.config import FurnaceConfig, config_from_dict
 log = logging.getLogger(__name__)
 
 _LOCK = threading.Lock()
-_FURNACES: dict[str, tuple[FurnaceConfig, Any]] = {}
+_FURNACES: dict[str, tuple[FurnaceConfig, Any, Any]] = {}  # digest -> config, radiation model, limits
 
 
 @dataclass(frozen=True)
@@ -43,22 +43,24 @@ class CaseTask:
     keep_series: bool = False
 
 
-def furnace_of(digest: str, furnace: dict[str, Any]) -> tuple[FurnaceConfig, Any, bool]:
-    """(config, radiation model, loaded now?) of a furnace, cached in this process by its digest."""
+def furnace_of(digest: str, furnace: dict[str, Any]) -> tuple[FurnaceConfig, Any, Any, bool]:
+    """(config, radiation model, scenario limits, loaded now?) of a furnace, cached in this process by its
+    digest."""
     with _LOCK:
         hit = _FURNACES.get(digest)
         if hit is not None:
-            return hit[0], hit[1], False
+            return (*hit, False)
+        from twin.limits import scenario_limits
         from twin.radiation import radiation_model
 
         cfg = config_from_dict(furnace)
         if cfg.digest() != digest:
             raise ValueError(f"furnace digest mismatch: the client sent {digest}, the worker computes "
                              f"{cfg.digest()} (different furnace-twin versions on client and worker?)")
-        rad = radiation_model(cfg)
-        _FURNACES[digest] = (cfg, rad)
+        entry = (cfg, radiation_model(cfg), scenario_limits(cfg))
+        _FURNACES[digest] = entry
         log.info("worker %s: furnace %s loaded", os.getpid(), digest)
-        return cfg, rad, True
+        return (*entry, True)
 
 
 #: warnings of a case kept in its record (the rest are counted)
@@ -125,9 +127,9 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
     from twin.scenario import Scenario
 
     try:
-        cfg, rad, loaded = furnace_of(task.furnace_digest, furnace)
+        cfg, rad, limits, loaded = furnace_of(task.furnace_digest, furnace)
         rec["radiation_loaded"] = loaded
-        scenario = Scenario.model_validate_json(task.scenario_json)
+        scenario = Scenario.model_validate_json(task.scenario_json, context={"limits": limits})
         t1 = time.perf_counter()
         rec["setup_s"] = t1 - t0
         loop = ClosedLoop(cfg, scenario, rad)
