@@ -186,7 +186,10 @@ class StudyManager:
         return result
 
     def figures(self, study_id: str) -> list[str]:
-        return sorted(p.name for p in (self.folder(self.get(study_id).id) / "figures").glob("*.png"))
+        """Names of the study's PNG figures, in the order the engine made them (metrics in product.md's order)."""
+        names = {p.name for p in (self.folder(self.get(study_id).id) / "figures").glob("*.png")}
+        made = [Path(f).name for f in (self.summary(study_id) or {}).get("figures", [])]
+        return [n for n in made if n in names] + sorted(names - set(made))
 
     def file(self, study_id: str, name: str) -> Path:
         """A served file of the study: one of :data:`STUDY_FILES` or ``figures/<name>.png``."""
