@@ -1,7 +1,7 @@
 // The Studies view: start a design study (the study file as JSON), the list with progress, and the picked
 // study's progress, best case per metric, percentiles, failed cases, figures and downloads.
 // Backed by POST /api/studies, GET /api/studies and GET /api/studies/{id}; stop and resume.
-import { api } from "./api.js";
+import { api, token } from "./api.js";
 import { $, pct, showMsg } from "./page.js";
 
 const ACTIVE = ["queued", "running"];
@@ -80,6 +80,29 @@ async function refreshStudy() {
   } catch (e) { $("study-detail").innerHTML = `<div class="msg err">${esc(e.message)}</div>`; }
 }
 
+// Figures and downloads are plain GETs; a server beyond loopback wants the token on reads too, which an <img> or
+// a link cannot send: then they are fetched with the header and shown / saved from a blob.
+async function fetchBlob(url) {
+  const r = await fetch(url, { headers: { "X-API-Token": token() } });
+  if (!r.ok) throw new Error(`${r.status} ${r.statusText}`);
+  return URL.createObjectURL(await r.blob());
+}
+
+function wireFiles(el) {
+  if (!token()) return;
+  for (const img of el.querySelectorAll(".figures img")) {
+    fetchBlob(img.dataset.src).then((b) => { img.src = b; img.parentElement.href = b; }).catch(() => { img.alt = `${img.alt} (not loaded)`; });
+  }
+  for (const a of el.querySelectorAll(".downloads a")) {
+    a.addEventListener("click", async (ev) => {
+      if (a.dataset.blob) return;
+      ev.preventDefault();
+      try { a.href = await fetchBlob(a.dataset.url); a.dataset.blob = "1"; a.click(); }
+      catch (e) { showMsg(`${a.textContent}: ${e.message}`, true, "study-ctl-msg"); }
+    });
+  }
+}
+
 function varied(doc) {
   const rows = Object.entries(doc.grid || {}).map(([p, v]) => `<li>grid <code>${esc(p)}</code>: ${v.map((x) => esc(num(x))).join(", ")}</li>`);
   const mc = doc.monte_carlo;
@@ -100,13 +123,13 @@ function renderStudy(s) {
   view.detailKey = key;
   const active = ACTIVE.includes(s.status);
   const resumable = ["interrupted", "stopped", "error"].includes(s.status);
-  const downloads = Object.entries(s.downloads).map(([n, u]) => `<a href="${u}" download>${esc(n)}</a>`).join(" · ");
+  const downloads = Object.entries(s.downloads).map(([n, u]) => `<a href="${u}" data-url="${u}" download="${esc(s.id)}-${esc(n)}">${esc(n)}</a>`).join(" · ");
   const best = (s.best || []).map((b) => `<tr><td>${esc(b.metric)}</td><td class="num">${pct(b.value)} %</td>
       <td>${params(b.params)}${b.key ? "" : ` <span class="muted">(median of ${b.n})</span>`}</td></tr>`).join("");
   const pcts = Object.entries(s.percentiles || {}).map(([m, p]) => `<tr><td>${esc(m)}</td>${["p5", "p50", "p95", "max"]
     .map((q) => `<td class="num">${pct(p[q])}</td>`).join("")}</tr>`).join("");
   const failed = (s.cases || []).filter((c) => c.status === "failed");
-  const figures = s.figures.map((u) => `<a href="${u}" target="_blank" rel="noopener" title="${esc(u.split("/").pop())}"><img src="${u}" loading="lazy" alt="${esc(u.split("/").pop())}"></a>`).join("");
+  const figures = s.figures.map((u) => `<a href="${u}" target="_blank" rel="noopener" title="${esc(u.split("/").pop())}"><img ${token() ? "" : `src="${u}"`} data-src="${u}" loading="lazy" alt="${esc(u.split("/").pop())}"></a>`).join("");
   $("study-detail").innerHTML = `
     <div class="study-head">
       <b>${esc(s.name || s.id)}</b> <span class="badge ${s.status}">${s.status}</span>
@@ -126,6 +149,7 @@ function renderStudy(s) {
     </div>
     ${failed.length ? `<h3>Failed cases</h3><ul class="failed">${failed.map((c) => `<li>${params(c.params)}: <span class="err">${esc(c.error)}</span></li>`).join("")}</ul>` : ""}
     ${figures ? `<h3>Figures</h3><div class="figures">${figures}</div>` : active ? `<div class="muted">figures and tables when the study ends</div>` : ""}`;
+  wireFiles($("study-detail"));
   $("study-stop").addEventListener("click", () => control("stop"));
   $("study-resume").addEventListener("click", () => control("resume"));
 }

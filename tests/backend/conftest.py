@@ -132,7 +132,7 @@ class FakeFactory:
     def __init__(self, step_cost_s: float = 0.0, replan_s: float = 0.0) -> None:
         self.step_cost_s, self.replan_s = step_cost_s, replan_s
 
-    def __call__(self, cfg: Any, scenario: Any) -> FakeLoop:
+    def __call__(self, cfg: Any, scenario: Any, *, budget: Any = None) -> FakeLoop:
         return FakeLoop(cfg, scenario, step_cost_s=self.step_cost_s, replan_s=self.replan_s)
 
     def check_reference(self, cfg: Any, ref: Any) -> None:
@@ -200,7 +200,7 @@ def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float = 120.0)
 def stream_frames(c: Any, run_id: str, on_frame=None) -> list[dict]:
     """Every frame of the run's stream until it closes; ``on_frame(frame)`` may act on the run."""
     frames = []
-    with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+    with c.websocket_connect(f"ws://127.0.0.1/api/runs/{run_id}/stream") as ws:
         while True:
             try:
                 f = json.loads(ws.receive_text())
@@ -210,6 +210,11 @@ def stream_frames(c: Any, run_id: str, on_frame=None) -> list[dict]:
             if on_frame is not None:
                 on_frame(f)
     return frames
+
+
+#: a valid 1 x 1 PNG (the fake study's figure)
+PNG_1X1 = bytes.fromhex("89504e470d0a1a0a0000000d4948445200000001000000010806000000"
+                        "1f15c4890000000d49444154789c6360f8cf00000301010018dd8db00000000049454e44ae426082")
 
 
 class FakeStudyRunner:
@@ -233,7 +238,11 @@ class FakeStudyRunner:
                  "metrics": None if stopped else {"inhomogeneity_steady": 0.01 * (c.index + 1)}, "error": None}
                 for c in cases]
         pending = sum(r["status"] == "pending" for r in rows)
+        figure = out / "figures" / "heatmap_inhomogeneity_steady.png"
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        figure.write_bytes(PNG_1X1)
         summary = {"cases": rows, "computed": len(rows) - pending, "skipped": 0, "failed": 0, "pending": pending,
-                   "workers": 1, "wall_s": 0.0, "results": str(out / "results.parquet"), "timing": None}
+                   "workers": 1, "wall_s": 0.0, "results": str(out / "results.parquet"), "timing": None,
+                   "figures": [str(figure)]}
         (out / "summary.json").write_text(json.dumps(summary))
         return summary

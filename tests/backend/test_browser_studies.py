@@ -17,6 +17,7 @@ from backend.threaded_server import ThreadedServer, free_port
 
 pytestmark = pytest.mark.browser
 
+TOKEN = "studies-browser-token-0123"
 STUDY = {"name": "browser study", "base": {"duration": 12.0, "reference": {"setpoint": 900.0, "t_E": 6.0}},
          "grid": {"tc_noise": [0.5, 1.0], "seed": [1, 2]}}
 
@@ -66,3 +67,23 @@ def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
     assert page.is_disabled("#study-stop") and page.is_disabled("#study-resume")
     page.screenshot(path=str(artifacts / "studies-view.png"))
     assert errors == []
+
+
+def test_with_a_token_figures_and_downloads_carry_it(browser, tmp_path, small_cfg) -> None:
+    """A server with an API token: a study started from the view after entering the token; its figure is
+    fetched with the token header (a blob URL) and shows."""
+    from conftest import FakeStudyRunner
+
+    s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token=TOKEN)
+    with ThreadedServer(create_app(s, small_cfg, study_runner=FakeStudyRunner()), free_port()) as srv:
+        page, errors = _open_dashboard(browser, srv.url)
+        page.wait_for_selector("#token-box", state="visible")
+        page.fill("#token", TOKEN)
+        page.dispatch_event("#token", "change")
+        page.click("#view-studies")
+        _fill(page, json.dumps({"name": "with token", "grid": {"tc_noise": [0.5, 1.0]}}))
+        page.click("#study-form button[type=submit]")
+        _wait_text(page, "#study-detail", "finished", timeout=30_000)
+        page.wait_for_function("(() => { const i = document.querySelector('#study-detail .figures img');"
+                               " return i && i.src.startsWith('blob:') && i.complete && i.naturalWidth === 1; })()")
+        assert errors == []

@@ -9,18 +9,19 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from conftest import FakeStudyRunner
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import FakeStudyRunner
 
+TOKEN = "studies-token-0123456789"
 BASE = {"duration": 12.0, "reference": {"setpoint": 900.0, "t_E": 6.0}}
 
 
 def make_client(tmp_path: Path, cfg, runner=None, **settings) -> TestClient:
     s = Settings(data_dir=tmp_path / "data", **settings)
-    return TestClient(create_app(s, cfg, study_runner=runner))
+    return TestClient(create_app(s, cfg, study_runner=runner), base_url="http://127.0.0.1")
 
 
 def wait_study(c: TestClient, study_id: str, statuses: set[str], timeout: float = 180.0) -> dict:
@@ -84,18 +85,18 @@ def test_bad_studies_are_422_with_the_reason(tmp_path, small_cfg, study, needle)
 
 
 def test_unknown_studies_and_files_are_404_and_changes_need_the_token(tmp_path, small_cfg) -> None:
-    with make_client(tmp_path, small_cfg, FakeStudyRunner(), api_token="s3cret") as c:
+    with make_client(tmp_path, small_cfg, FakeStudyRunner(), api_token=TOKEN) as c:
         assert c.get("/api/studies/nope").status_code == 404
         assert c.post("/api/studies", json={"grid": {"tc_noise": [1.0]}}).status_code == 401
-        r = c.post("/api/studies", json={"grid": {"tc_noise": [1.0]}}, headers={"X-API-Token": "s3cret"})
+        r = c.post("/api/studies", json={"grid": {"tc_noise": [1.0]}}, headers={"X-API-Token": TOKEN})
         assert r.status_code == 201
         study_id = r.json()["id"]
         wait_study(c, study_id, {"finished"})
         for name in ("request.json", "../request.json", "figures/../status.json", "cases", "figures/.x.png"):
             assert c.get(f"/api/studies/{study_id}/files/{name}").status_code == 404, name
         assert c.get(f"/api/studies/{study_id}/files/summary.json").status_code == 200
-        assert c.post(f"/api/studies/{study_id}/stop", headers={"X-API-Token": "s3cret"}).status_code == 409
-        assert c.post(f"/api/studies/{study_id}/resume", headers={"X-API-Token": "s3cret"}).status_code == 409
+        assert c.post(f"/api/studies/{study_id}/stop", headers={"X-API-Token": TOKEN}).status_code == 409
+        assert c.post(f"/api/studies/{study_id}/resume", headers={"X-API-Token": TOKEN}).status_code == 409
 
 
 def test_stop_then_resume(tmp_path, small_cfg) -> None:
