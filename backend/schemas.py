@@ -109,3 +109,39 @@ class FurnaceOut(BaseModel):
     limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
                                                "{min, max, exclusive_min, unit, default}")
     defaults: dict[str, Any] = Field(description="the scenario a POST with an empty body starts")
+
+
+class StudyLinks(BaseModel):
+    self: str
+    stop: str
+    resume: str
+    files: str = Field(description="prefix of the study's files: results.parquet, results.csv, study.md, "
+                                   "summary.json, figures/<name>.png")
+
+
+class StudySummary(BaseModel):
+    id: str
+    name: str | None = None
+    furnace: str
+    status: str = Field(description="queued, running, finished, stopped, interrupted or error")
+    created_at: float = Field(description="unix s")
+    started_at: float | None = None
+    ended_at: float | None = None
+    total: int = Field(description="cases of the study")
+    finished: int = Field(description="cases done or failed, including those found done earlier")
+    failed: int
+    skipped: int = Field(description="cases found done by an earlier invocation (resume)")
+    workers: int = Field(description="Dask workers of the current or last invocation")
+    error: str | None = None
+    links: StudyLinks
+
+
+class StudyDetail(StudySummary):
+    study: dict[str, Any] = Field(description="the study document as posted")
+    cases: list[dict[str, Any]] | None = Field(
+        None, description="per case: key, index, params, status, metrics, error (when the study has ended)")
+    best: list[dict[str, Any]] = Field(default_factory=list, description="best case (or grid point) per metric")
+    percentiles: dict[str, dict[str, float]] | None = Field(None, description="Monte Carlo: per metric")
+    timing: dict[str, Any] | None = None
+    figures: list[str] = Field(default_factory=list, description="URLs of the PNG figures")
+    downloads: dict[str, str] = Field(default_factory=dict, description="file name -> URL")

@@ -8,6 +8,7 @@ import { $, LIVE } from "./page.js";
 import { refreshHistory, refreshRun, selectRun, wireHistory } from "./runs.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
+import { initStudies } from "./studies.js";
 
 window.state = state; // the page's state, for the browser console and the browser tests
 
@@ -15,6 +16,7 @@ async function init() {
   forgetOldToken();
   wireForms();
   wireHistory();
+  initStudies();
   try {
     [state.health, state.furnace] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace")]);
     applyLimits(state.furnace);

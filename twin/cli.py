@@ -1,4 +1,4 @@
-"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench.
+"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, study.
 
 Each sub-command lives in its own module and is imported only when used, so
 ``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
@@ -26,6 +26,16 @@ def _rel_point(text: str) -> tuple[float, float]:
     if not (0 <= x <= 1 and 0 <= y <= 1):
         raise argparse.ArgumentTypeError("X,Y are relative to (L_s, W_s) and must lie in [0, 1]")
     return (x, y)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError("must be at least 1")
+    return n
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,6 +85,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+
+    s = sub.add_parser("study", help="a design study (grid and/or Monte Carlo of runs) on Dask distributed")
+    s.add_argument("file", help="study TOML file (product.md: furnace, [base], [grid], [monte_carlo])")
+    s.add_argument("--out", default=None, help="study folder (default out/studies/<file name>); re-run to resume")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, default=None,
+                       help="LocalCluster process workers (default: one per core)")
+    where.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    s.add_argument("--json", action="store_true", help="print the study result as JSON")
+    s.add_argument("--keep-series", action="store_true", help="keep each case's timeseries.npz")
     for sp in sub.choices.values():  # --config also after the command (furnace-twin campaign --config banded)
         sp.add_argument("--config", default=argparse.SUPPRESS, help="as before the command")
     return p
@@ -132,6 +152,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.runs.bench import bench_command
 
             return bench_command(cfg, args)
+        if args.command == "study":
+            from twin.studies.command import study_command
+
+            return study_command(cfg, args)
     except ConfigError as exc:
         print(f"furnace-twin: {exc}", file=sys.stderr)  # noqa: T201
         return 2
