@@ -20,12 +20,22 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from backend.messages import plain_errors
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, files, furnace, health, runs, stream
-from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
+from backend.routes import dashboard, exports, files, furnace, health, runs, stream
+from backend.run_manager import (
+    LimitExceeded,
+    RequestConflict,
+    RunIsActive,
+    RunManager,
+    RunNotActive,
+    RunNotFound,
+    TooManyRuns,
+)
 from backend.run_worker import ChangeRejected, LoopFactory
 from backend.settings import Settings
 from twin.config import FurnaceConfig, load_config
@@ -36,6 +46,8 @@ log = logging.getLogger(__name__)
 ERRORS: dict[type[Exception], int] = {
     RunNotFound: status.HTTP_404_NOT_FOUND,
     RunNotActive: status.HTTP_409_CONFLICT,
+    RunIsActive: status.HTTP_409_CONFLICT,
+    RequestConflict: status.HTTP_409_CONFLICT,
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
@@ -45,6 +57,12 @@ ERRORS: dict[type[Exception], int] = {
 async def _error(request: Request, exc: Exception) -> JSONResponse:
     code = next(c for t, c in ERRORS.items() if isinstance(exc, t))
     return JSONResponse({"detail": str(exc) or type(exc).__name__}, status_code=code)
+
+
+async def _invalid(request: Request, exc: Exception) -> JSONResponse:
+    """A 422 in FastAPI's shape (``detail``: ``[{loc, msg, type}]``), each message in plain words."""
+    errors = exc.errors() if isinstance(exc, RequestValidationError) else []
+    return JSONResponse({"detail": plain_errors(errors)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
 def create_app(
@@ -96,8 +114,9 @@ def create_app(
         lifespan=lifespan,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, dashboard):
+    for module in (health, furnace, runs, files, exports, stream, dashboard):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
+    app.add_exception_handler(RequestValidationError, _invalid)
     return app

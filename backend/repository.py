@@ -40,8 +40,13 @@ CREATE TABLE IF NOT EXISTS changes (
 );
 CREATE INDEX IF NOT EXISTS changes_run ON changes(run_id);
 """
+#: columns added after the first release: (name, SQL type); added to an older database when it is opened
+_ADDED_COLUMNS = (("label", "TEXT"),)
+MAX_LABEL_CHARS = 80
 
 ACTIVE_STATUSES = ("queued", "starting", "running")
+#: the columns of a RunRow, in its order (named: an older database has its added columns last, in any order)
+_RUN_COLUMNS = "id, scenario, status, created_at, started_at, ended_at, latest, metrics, error, label"
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,7 @@ class RunRow:
     latest: dict[str, Any] | None
     metrics: dict[str, Any] | None
     error: str | None
+    label: str | None = None
 
 
 @dataclass(frozen=True)
@@ -83,6 +89,10 @@ class RunRepository:
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SCHEMA)
+        have = {r[1] for r in self._db.execute("PRAGMA table_info(runs)")}
+        for name, kind in _ADDED_COLUMNS:
+            if name not in have:
+                self._db.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
 
     def close(self) -> None:
         with self._lock:
@@ -123,13 +133,30 @@ class RunRepository:
             ),
         )
 
+    def set_label(self, run_id: str, label: str | None) -> None:
+        """A user's name for the run (``None`` or empty: none)."""
+        self._exec("UPDATE runs SET label=? WHERE id=?", (label or None, run_id))
+
+    def delete_run(self, run_id: str) -> bool:
+        """Remove the run and its changes; ``False`` if there was no such run."""
+        with self._lock:
+            self._db.execute("BEGIN")
+            try:
+                self._db.execute("DELETE FROM changes WHERE run_id=?", (run_id,))
+                gone = self._db.execute("DELETE FROM runs WHERE id=?", (run_id,)).rowcount
+                self._db.execute("COMMIT")
+            except Exception:
+                self._db.execute("ROLLBACK")
+                raise
+        return bool(gone)
+
     def get(self, run_id: str) -> RunRow | None:
-        cur = self._exec("SELECT * FROM runs WHERE id=?", (run_id,))
+        cur = self._exec(f"SELECT {_RUN_COLUMNS} FROM runs WHERE id=?", (run_id,))
         row = cur.fetchone()
         return None if row is None else self._run(row)
 
     def list_runs(self, limit: int = 200) -> list[RunRow]:
-        cur = self._exec("SELECT * FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
+        cur = self._exec(f"SELECT {_RUN_COLUMNS} FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
         return [self._run(r) for r in cur.fetchall()]
 
     def count_active(self) -> int:
@@ -177,5 +204,5 @@ class RunRepository:
     def _run(r: tuple[Any, ...]) -> RunRow:
         return RunRow(
             id=r[0], scenario=json.loads(r[1]), status=r[2], created_at=r[3], started_at=r[4],
-            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8],
+            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8], label=r[9],
         )

@@ -20,13 +20,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from backend.frames import SnapshotLike, json_safe, scalar_values
+from backend.frames import SnapshotLike, events_of, finite_or_none, json_safe, scalar_values
 from backend.recording import RecordingSink
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.settings import Settings
 from twin.config import FurnaceConfig
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.control.saturation import SaturationWatch, bound_flags
+from twin.physics.fillet import Fillet
+from twin.runs.record import RunEvent, event_arrays
+from twin.scenario import OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +77,12 @@ class _Change:
     value: Any
     change_id: int
     future: concurrent.futures.Future[dict[str, Any]]
+    notes: tuple[str, ...] = ()  # feasibility warnings, reported as events when the change applies
+
+
+#: what a run's own end is called in its events
+END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
+             "error": "run failed"}
 
 
 class RunWorker:
@@ -88,6 +97,7 @@ class RunWorker:
         repo: RunRepository,
         files: RunFiles,
         loop_factory: LoopFactory,
+        notes: tuple[str, ...] = (),
     ) -> None:
         self.run_id = run_id
         self.scenario = scenario
@@ -110,6 +120,25 @@ class RunWorker:
         self._origin_wall = 0.0
         self._origin_t = 0.0
         self._last_flush = 0.0
+        #: the run's events, oldest first (appended in the worker thread; readers take len() then slice)
+        self.events: list[RunEvent] = []
+        self._notes = notes
+        self._saturation = SaturationWatch([g.name for g in cfg.lamps.groups], cfg.sampling.t_s)
+        self._fillet = Fillet.of(cfg)
+
+    # ---- events (worker thread) ----
+    def add_event(self, t: float, text: str, level: str = "info") -> None:
+        """One report of the run: kept for the stream, the time series and the recording."""
+        event = RunEvent(float(t), text, level)
+        self.events.append(event)
+        if self.recording is not None:
+            self.recording.log_event(event.t, event.text, event.level)
+
+    def frame_extra(self, snap: SnapshotLike) -> dict[str, Any]:
+        """What a frame carries beyond the snapshot: the spread about the fillet mean (K) and the groups at
+        a bound (+1 full power, -1 off)."""
+        return {"spread": finite_or_none(self._fillet.spread(snap.field_hat)),
+                "saturated": bound_flags(snap.u).tolist()}
 
     # ---- set-up (worker thread) ----
     def build(self) -> None:
@@ -121,6 +150,12 @@ class RunWorker:
             image_interval=self.settings.recording_image_interval_s,
         )
         self.loop = self._factory(self.cfg, self.scenario)
+        sc = self.scenario
+        speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
+        self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
+                            f"{describe(sc.oscillation)}, {sc.duration:g} s, {speed}")
+        for note in self._notes:
+            self.add_event(0.0, f"feasibility: {note}", "warn")
         self._rebase(0.0)
         self._last_flush = time.monotonic()
 
@@ -130,10 +165,11 @@ class RunWorker:
         self._origin_t = t
 
     # ---- changes (any thread submits, worker applies) ----
-    def submit_change(self, kind: str, value: Any, change_id: int) -> concurrent.futures.Future[dict[str, Any]]:
+    def submit_change(self, kind: str, value: Any, change_id: int,
+                      notes: tuple[str, ...] = ()) -> concurrent.futures.Future[dict[str, Any]]:
         fut: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
         with self._changes_lock:
-            self._changes.append(_Change(kind, value, change_id, fut))
+            self._changes.append(_Change(kind, value, change_id, fut, notes))
         return fut
 
     def _apply_changes(self) -> bool:
@@ -156,13 +192,18 @@ class RunWorker:
                     self.oscillation = ch.value
             except ValueError as exc:
                 self.repo.finish_change(ch.change_id, "rejected", t, str(exc))
+                self.add_event(t, f"{ch.kind} change to {describe(ch.value)} refused: {exc}", "warn")
                 ch.future.set_exception(ChangeRejected(str(exc)))
                 continue
             except Exception as exc:  # the run goes on with its old plan
                 log.exception("run %s: %s change failed", self.run_id, ch.kind)
                 self.repo.finish_change(ch.change_id, "failed", t, repr(exc))
+                self.add_event(t, f"{ch.kind} change to {describe(ch.value)} failed, the run keeps its plan: "
+                                  f"{exc}", "error")
                 ch.future.set_exception(exc)
                 continue
+            for note in ch.notes:
+                self.add_event(t, f"feasibility: {note}", "warn")
             replan_s = time.monotonic() - t0
             log.info("run %s: %s changed at t=%.1f s (re-plan %.2f s)", self.run_id, ch.kind, t, replan_s)
             self.repo.finish_change(ch.change_id, "applied", t, None)
@@ -174,6 +215,8 @@ class RunWorker:
             pending, self._changes = list(self._changes), deque()
         for ch in pending:
             self.repo.finish_change(ch.change_id, "cancelled", None, reason)
+            self.add_event(float(self.latest.t) if self.latest is not None else 0.0,
+                           f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
             ch.future.set_exception(ChangeRejected(reason))
 
     # ---- stepping (worker thread) ----
@@ -207,6 +250,10 @@ class RunWorker:
             samples.append((snap, self.seq, self.latest_wall))
             if self.recording is not None:
                 self.recording.add(snap)
+            for text in events_of(snap.events):
+                self.add_event(float(snap.t), text, "warn" if "failed" in text else "info")
+            for event in self._saturation.update(float(snap.t), snap.u):
+                self.add_event(event.t, event.text, event.level)
             wait = 0.0
             if time.monotonic() - start >= budget_s:
                 break
@@ -221,7 +268,12 @@ class RunWorker:
             return None
         data = dict(self.loop.timeseries())
         data.setdefault("scenario", self.scenario.to_json())
+        data.update(event_arrays(list(self.events)))  # the loop's events and the server's own
         return data
+
+    def series(self) -> dict[str, Any] | None:
+        """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush; any thread."""
+        return self._timeseries()
 
     def flush(self, metrics: dict[str, Any] | None = None) -> None:
         """Write the time series so far, the latest values and the recording's buffer to disk."""
@@ -234,8 +286,15 @@ class RunWorker:
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 
-    def finalize(self) -> dict[str, Any] | None:
-        """Last flush; metrics of the run so far (``None`` entries where a window was not reached)."""
+    def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
+        """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
+        far (``None`` entries where a window was not reached)."""
+        if status is not None:
+            t = float(self.latest.t) if self.latest is not None else 0.0
+            words = END_WORDS.get(status, f"run {status}")
+            at = f" at t = {t:.1f} s" if status != "finished" else ""
+            self.add_event(t, f"{words}{at}{f': {error}' if error else ''}",
+                           "error" if status == "error" else ("warn" if status == "interrupted" else "info"))
         metrics: dict[str, Any] | None = None
         if self.loop is not None and self.latest is not None:
             try:

@@ -27,6 +27,10 @@ class RunCreated(BaseModel):
     id: str
     status: str
     links: RunLinks
+    warnings: list[str] = Field(default_factory=list,
+                                description="what the feasibility check found (the run starts anyway)")
+    replayed: bool = Field(False, description="true when this answers a repeated request id (Idempotency-Key): "
+                                              "the run the first request started")
 
 
 class ChangeOut(BaseModel):
@@ -46,6 +50,7 @@ class ChangeResult(BaseModel):
     body: dict[str, Any]
     applied_t: float | None = None
     replan_s: float | None = Field(None, description="wall time of the re-plan (s)")
+    warnings: list[str] = Field(default_factory=list, description="feasibility of a new reference")
 
 
 class RunSummary(BaseModel):
@@ -58,7 +63,14 @@ class RunSummary(BaseModel):
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
     metrics: dict[str, float | None] | None = None
     error: str | None = None
+    label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
     links: RunLinks
+
+
+class LabelIn(BaseModel):
+    """``PATCH /api/runs/{id}``: the run's name (null or empty: none)."""
+
+    label: str | None = Field(None, description="at most 80 characters")
 
 
 class RunDetail(RunSummary):
@@ -67,6 +79,8 @@ class RunDetail(RunSummary):
     oscillation: dict[str, Any] = Field(description="the oscillation in force now, likewise")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
+    windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "
+                                                             "[a, b], steady: [a, b]}, from the last reference change")
 
 
 class StopResult(BaseModel):

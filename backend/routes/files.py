@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse
 
 from backend.deps import ManagerDep
-from backend.series import load_series
+from backend.series import NoSeries, run_arrays, series_json
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
 
@@ -44,9 +44,12 @@ def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
 @router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
 def series(run_id: str, manager: ManagerDep,
            max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> dict[str, Any]:
-    """The stored time series as JSON (decimated to ``max_points``) for charts of any run."""
-    path = _file(run_id, manager, "timeseries")
+    """The run's time series so far as JSON (decimated to ``max_points``) for charts of any run: a running
+    run's up to its latest sample, with every event, the live changes and the metric windows
+    (``backend.series``)."""
     try:
-        return load_series(path, max_points)
+        return series_json(run_arrays(manager, run_id), max_points)
+    except NoSeries as exc:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
     except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read {path.name}: {exc}") from None
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read its time series: {exc}") from None

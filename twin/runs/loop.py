@@ -48,11 +48,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
+from twin.control.plan import plain_status
 from twin.furnace.interface import Furnace, Readings
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
 from twin.runs.record import RunHeader, RunRecord, Snapshot
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -200,7 +201,8 @@ class ClosedLoop:
             ref_fn = self._make_reference(spec, T_now, t_start=t_now)
             self._reference_spec = spec
             self._set_ref_fn(ref_fn)
-            self._start_replan(self._oscillation, f"reference changed at t = {t_now:.1f} s")
+            self.record.note_change(t_now, "reference", spec.model_dump_json())
+            self._start_replan(self._oscillation, f"reference changed at t = {t_now:.1f} s to {describe(spec)}")
 
     def set_oscillation(self, spec: OscillationSpec) -> None:
         """Switch the specimen motion now; model, plan and gains follow after re-planning."""
@@ -208,7 +210,9 @@ class ClosedLoop:
             t_now = self.j * self.t_s
             self._oscillation = spec
             self.furnace.set_oscillation(spec, t_now)
-            self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s")
+            self.record.note_change(t_now, "oscillation", spec.model_dump_json())
+            how = f" ({describe(spec).removeprefix('on (')}" if spec.enabled else ""  # " (48 mm, 18 s)"
+            self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s{how}")
 
     def _start_replan(self, spec: OscillationSpec, description: str) -> None:
         theta = self.estimator.state.theta.copy()
@@ -226,7 +230,7 @@ class ClosedLoop:
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         self.estimator.set_model(ctl.model)
-        self._events.append(f"re-planned ({description}): {ctl.plan.status}")
+        self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}")
 
     def _poll_pending(self) -> None:
         p = self._pending

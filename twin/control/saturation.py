@@ -1,0 +1,86 @@
+"""Lamp groups at their bounds: u = u_max (full power) or u = 0 (off), the box constraint of eq. (18).
+
+A group at a bound has no authority left in that direction: at full power it cannot heat faster,
+off it cannot cool faster; the feedback (eq. 25) is clipped there.  :func:`bound_flags` marks each
+sample (+1 at full power, -1 off, 0 in between); :class:`SaturationWatch` turns the flags of a
+running run into events once a group has stayed at a bound for ``MIN_EPISODE_S`` (single clipped
+samples are normal feedback action and stay quiet), and says when it came off again.
+
+Example
+-------
+>>> watch = SaturationWatch(("T1h", "T2v"), t_s=0.5, min_duration_s=1.0)
+>>> for k, u2 in enumerate([0.5, 1.0, 1.0, 1.0, 1.0, 0.9, 0.8, 0.8]):
+...     for e in watch.update(0.5 * k, [0.4, u2]):
+...         print(e.t, e.text)
+1.5 T2v at full power (100 %) since t = 0.5 s: no headroom left to heat
+2.5 T2v below full power again at t = 2.5 s, after 2.0 s
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from twin.runs.record import RunEvent
+
+AT_BOUND = 1e-3  # a group within this fraction of u_max of 0 or 1 is at its bound
+MIN_EPISODE_S = 1.0  # a group reported after this long at a bound
+
+
+def bound_flags(u: ArrayLike) -> NDArray[np.int8]:
+    """+1 where a group is at full power, -1 where it is off, 0 in between (same shape as ``u``; NaN: 0).
+
+    >>> bound_flags([1.0, 0.9995, 0.5, 0.0, float("nan")]).tolist()
+    [1, 1, 0, -1, 0]
+    """
+    a = np.asarray(u, float)
+    out = np.zeros(a.shape, np.int8)
+    with np.errstate(invalid="ignore"):
+        out[a >= 1.0 - AT_BOUND] = 1
+        out[a <= AT_BOUND] = -1
+    return out
+
+
+@dataclass
+class _Episode:
+    bound: int
+    since: float
+    reported: bool = False
+
+
+class SaturationWatch:
+    """Events of the groups that stay at a bound for at least ``min_duration_s``."""
+
+    def __init__(self, group_names: Sequence[str], t_s: float, min_duration_s: float = MIN_EPISODE_S) -> None:
+        self.names = tuple(group_names)
+        self.min_duration_s = float(min_duration_s)
+        self.t_s = float(t_s)
+        self._open: dict[int, _Episode] = {}
+
+    def update(self, t: float, u: ArrayLike) -> list[RunEvent]:
+        """Flags of one sample at run time ``t`` (s); returns the events it causes (``warn`` when a group
+        saturates, ``info`` when it comes off)."""
+        events: list[RunEvent] = []
+        for j, flag in enumerate(bound_flags(u)[: len(self.names)].tolist()):
+            ep = self._open.get(j)
+            if ep is not None and ep.bound != flag:  # the episode ends at this sample
+                del self._open[j]
+                if ep.reported:
+                    what = "below full power" if ep.bound > 0 else "on"
+                    events.append(RunEvent(t, f"{self.names[j]} {what} again at t = {t:.1f} s, "
+                                              f"after {t - ep.since:.1f} s", "info"))
+                ep = None
+            if flag and ep is None:
+                ep = self._open[j] = _Episode(flag, t)
+            if ep is not None and not ep.reported and t - ep.since >= self.min_duration_s - 1e-9:
+                ep.reported = True
+                if flag > 0:
+                    text = (f"{self.names[j]} at full power (100 %) since t = {ep.since:.1f} s: "
+                            "no headroom left to heat")
+                else:
+                    text = f"{self.names[j]} off (0 %) since t = {ep.since:.1f} s: no headroom left to cool"
+                events.append(RunEvent(t, text, "warn"))
+        return events
