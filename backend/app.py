@@ -26,7 +26,7 @@ from fastapi.responses import JSONResponse
 from backend.messages import plain_errors
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, exports, files, furnace, health, runs, stream
+from backend.routes import dashboard, exports, files, furnace, glossary, health, runs, stream
 from backend.run_manager import (
     LimitExceeded,
     RequestConflict,
@@ -114,7 +114,7 @@ def create_app(
         lifespan=lifespan,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, exports, stream, dashboard):
+    for module in (health, furnace, glossary, runs, files, exports, stream, dashboard):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)

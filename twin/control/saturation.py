@@ -3,17 +3,19 @@
 A group at a bound has no authority left in that direction: at full power it cannot heat faster,
 off it cannot cool faster; the feedback (eq. 25) is clipped there.  :func:`bound_flags` marks each
 sample (+1 at full power, -1 off, 0 in between); :class:`SaturationWatch` turns the flags of a
-running run into events once a group has stayed at a bound for ``MIN_EPISODE_S`` (single clipped
-samples are normal feedback action and stay quiet), and says when it came off again.
+running run into events: a spell at full power once it lasted ``MIN_FULL_S``, a spell off once it
+lasted ``MIN_OFF_S`` (single clipped samples are normal feedback action and stay quiet; a group that
+idles near zero touches it all the time), and the end of a reported spell once the group stayed
+away from the bound for ``RELEASE_S`` (a group that leaves for a moment does not start a new spell).
 
 Example
 -------
->>> watch = SaturationWatch(("T1h", "T2v"), t_s=0.5, min_duration_s=1.0)
->>> for k, u2 in enumerate([0.5, 1.0, 1.0, 1.0, 1.0, 0.9, 0.8, 0.8]):
+>>> watch = SaturationWatch(("T1h", "T2v"), t_s=0.5)
+>>> for k, u2 in enumerate([0.5, 1.0, 1.0, 1.0, 0.9, 1.0, 1.0, 0.8, 0.8, 0.8, 0.8]):
 ...     for e in watch.update(0.5 * k, [0.4, u2]):
 ...         print(e.t, e.text)
 1.5 T2v at full power (100 %) since t = 0.5 s: no headroom left to heat
-2.5 T2v below full power again at t = 2.5 s, after 2.0 s
+4.0 T2v below full power again since t = 3.5 s, after 3.0 s
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ from numpy.typing import ArrayLike, NDArray
 from twin.runs.record import RunEvent
 
 AT_BOUND = 1e-3  # a group within this fraction of u_max of 0 or 1 is at its bound
-MIN_EPISODE_S = 1.0  # a group reported after this long at a bound
+MIN_FULL_S = 1.0  # a spell at full power is reported after this long
+MIN_OFF_S = 5.0  # a spell off is reported after this long
+RELEASE_S = 1.0  # a spell ends when the group stayed this long away from its bound
 
 
 def bound_flags(u: ArrayLike) -> NDArray[np.int8]:
@@ -48,36 +52,43 @@ def bound_flags(u: ArrayLike) -> NDArray[np.int8]:
 class _Episode:
     bound: int
     since: float
+    last: float  # the last sample at the bound
     reported: bool = False
 
 
 class SaturationWatch:
-    """Events of the groups that stay at a bound for at least ``min_duration_s``."""
+    """Events of the groups that stay at a bound (see the module docstring for the durations)."""
 
-    def __init__(self, group_names: Sequence[str], t_s: float, min_duration_s: float = MIN_EPISODE_S) -> None:
+    def __init__(self, group_names: Sequence[str], t_s: float, min_full_s: float = MIN_FULL_S,
+                 min_off_s: float = MIN_OFF_S, release_s: float = RELEASE_S) -> None:
         self.names = tuple(group_names)
-        self.min_duration_s = float(min_duration_s)
         self.t_s = float(t_s)
+        self.min_s = {1: float(min_full_s), -1: float(min_off_s)}
+        self.release_s = float(release_s)
         self._open: dict[int, _Episode] = {}
 
     def update(self, t: float, u: ArrayLike) -> list[RunEvent]:
         """Flags of one sample at run time ``t`` (s); returns the events it causes (``warn`` when a group
         saturates, ``info`` when it comes off)."""
         events: list[RunEvent] = []
+        eps = 1e-9
         for j, flag in enumerate(bound_flags(u)[: len(self.names)].tolist()):
             ep = self._open.get(j)
-            if ep is not None and ep.bound != flag:  # the episode ends at this sample
+            if ep is not None and flag == ep.bound:
+                ep.last = t
+            elif ep is not None and (flag != 0 or t - ep.last >= self.release_s - eps):  # the spell is over
                 del self._open[j]
                 if ep.reported:
+                    left = ep.last + self.t_s
                     what = "below full power" if ep.bound > 0 else "on"
-                    events.append(RunEvent(t, f"{self.names[j]} {what} again at t = {t:.1f} s, "
-                                              f"after {t - ep.since:.1f} s", "info"))
+                    events.append(RunEvent(t, f"{self.names[j]} {what} again since t = {left:.1f} s, "
+                                              f"after {left - ep.since:.1f} s", "info"))
                 ep = None
             if flag and ep is None:
-                ep = self._open[j] = _Episode(flag, t)
-            if ep is not None and not ep.reported and t - ep.since >= self.min_duration_s - 1e-9:
+                ep = self._open[j] = _Episode(flag, t, t)
+            if ep is not None and not ep.reported and ep.last - ep.since >= self.min_s[ep.bound] - eps:
                 ep.reported = True
-                if flag > 0:
+                if ep.bound > 0:
                     text = (f"{self.names[j]} at full power (100 %) since t = {ep.since:.1f} s: "
                             "no headroom left to heat")
                 else:
