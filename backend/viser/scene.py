@@ -95,6 +95,7 @@ class FurnaceScene:
         self.housing: list[Any] = []
         self.tc_markers: list[Any] = []
         self.tc_labels: list[Any] = []
+        self.labels: dict[str, Any] = {}  # the names of the parts on the scene (scene node -> label handle)
         self.plate_rgb: np.ndarray | None = None  # vertex colours on the plate now
         self._lamp_rgb: np.ndarray | None = None
         self._build()
@@ -167,7 +168,8 @@ class FurnaceScene:
                     else:  # axis along x: at the left or right end
                         pos = (lo[0] if first else hi[0], 0.5 * (lo[1] + hi[1]), lo[2])
                         anchor = "center-right" if first else "center-left"
-                    sc.add_label(f"/labels/groups/{g.name}-{side}{bi}", g.name, position=pos, anchor=anchor)
+                    node = f"/labels/groups/{g.name}-{side}{bi}"
+                    self.labels[node] = sc.add_label(node, g.name, position=pos, anchor=anchor)
         words = {"reflector_h": "gold reflector (horizontal lamps)", "reflector_v": "gold reflector (vertical lamps)",
                  "holder_upper": "upper holder (x = 0)", "holder_lower": "lower holder", "window": "quartz window"}
         for name, text in words.items():
@@ -179,7 +181,7 @@ class FurnaceScene:
                 pos, where = (hi[0], hi[1], hi[2]), "bottom-right"
             else:
                 pos, where = (0.5 * (lo[0] + hi[0]), lo[1], hi[2]), "top-center"
-            sc.add_label(f"/labels/{name}", text, position=pos, anchor=where)
+            self.labels[f"/labels/{name}"] = sc.add_label(f"/labels/{name}", text, position=pos, anchor=where)
 
     def show_housing(self, visible: bool) -> None:
         with self.server.atomic():
