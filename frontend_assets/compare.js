@@ -46,7 +46,8 @@ export async function refreshComparison() {
   busy = true;
   try {
     const entries = (await Promise.all(ids.map((id) => load(id).catch(() => null)))).filter(Boolean);
-    const names = entries.map((e) => runName(e.detail));
+    // names from the runs list (a label edited since is shown at once), the rest from each run's detail
+    const names = entries.map((e) => runName(state.runs.find((r) => r.id === e.detail.id) || e.detail));
     const tr = traces(entries, names);
     window.Plotly.react("cmp-mean", tr.mean, baseLayout("T (K)"), CONFIG);
     window.Plotly.react("cmp-sup", tr.sup, baseLayout("T_sup (K)"), CONFIG);

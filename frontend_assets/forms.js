@@ -69,7 +69,8 @@ async function startRun(ev) {
     const warn = created.warnings && created.warnings.length ? ` · warning: ${created.warnings[0]}` : "";
     showMsg(`run ${created.id} started${again}: reference ${describeReference(scenario.reference)}${warn}`,
       warn ? "warn" : false, "start-msg");
-    await selectRun(created.id);
+    btn.disabled = false; // the reply is in: a click from now on is a new request (or the same, if repeated)
+    if (state.runId !== created.id) selectRun(created.id);
     refreshRuns();
   } catch (e) {
     if (!scenario && refMode("refmode") === "points" && /points/.test(e.message)) area.classList.add("invalid");

@@ -34,7 +34,7 @@ export function heatmapFigure() {
   const place = [{ yshift: 13 }, { yshift: 13 }, { yshift: 13 }, { yshift: -14 }];
   const annotations = tcx.map((x, i) => ({ ...LABEL, ...place[i], x, y: tcy[i],
     text: `TC${i + 1}${i === 3 ? " (val.)" : ""}${tc[i] === null || tc[i] === undefined ? "" : ` ${fmt(tc[i])} K`}` }));
-  annotations.push({ ...LABEL, x: x0, y: y0, xanchor: "left", yanchor: "bottom", xshift: 3, yshift: 3, text: "fillet" });
+  annotations.push({ ...LABEL, x: x0, y: y1, xanchor: "left", yanchor: "top", xshift: 3, yshift: -3, text: "fillet" });
   return {
     data: [
       { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best", zmin, zmax, zauto: zmin === undefined,

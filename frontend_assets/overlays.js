@@ -14,8 +14,9 @@ export function windowShapes(w, tMax, xref = "x") {
     if (!(a < tMax)) continue;
     shapes.push({ type: "rect", xref, yref: "paper", x0: a, x1: Math.min(b, tMax), y0: 0, y1: 1, layer: "below",
       fillcolor: WINDOW_STYLE[name], line: { width: 0 } });
-    annotations.push({ xref, yref: "paper", x: a, y: 1, xanchor: "left", yanchor: "top", showarrow: false,
-      text: name === "transient" ? "transient" : "steady (1.5–2 t<sub>E</sub>)", font: { size: 9, color: "#56627a" } });
+    const top = name === "transient"; // transient named at the top, steady at the bottom: narrow bands never collide
+    annotations.push({ xref, yref: "paper", x: a, y: top ? 1 : 0, xanchor: "left", yanchor: top ? "top" : "bottom",
+      showarrow: false, text: top ? "transient" : "steady (1.5–2 t<sub>E</sub>)", font: { size: 9, color: "#56627a" } });
   }
   return { shapes, annotations };
 }

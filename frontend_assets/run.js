@@ -84,6 +84,7 @@ async function loadHistory(runId) {
     if (state.runId !== runId) return;
     state.series = seriesFromStored(d);
     state.series.windows = d.windows;
+    state.historyEnd = d.t_last; // the last sample the history brought; the stream continues after it
     addEvents(d.events);
     const n = d.t ? d.t.length : 0;
     if (n) state.lastFrame = { t: d.t[n - 1], T_mean_hat: d.T_mean_hat[n - 1], T_ref: d.T_ref[n - 1] };
@@ -102,7 +103,7 @@ export async function selectRun(runId) {
   await refreshRun(true);
   const run = state.run;
   if (!run || run.id !== runId) return;
-  if (LIVE.includes(run.status)) connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
+  if (LIVE.includes(run.status)) await connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
   await loadHistory(runId);
   if (state.runId !== runId) return;
   state.loading = false;

@@ -9,6 +9,7 @@ export const state = {
   ws: null, frames: 0, series: null, lastFrame: null, dirty: false,
   loading: false, // the shown run's history is being read; frames wait in `held`
   held: [],
+  historyEnd: null, // run time of the last sample of the history (GET .../series)
   events: new Map(), // n -> {n, t, text, level}: the shown run's events, each once
   lastStatus: null, stopping: null,
   oscShown: null, // the in-force oscillation last copied into the live inputs (JSON)

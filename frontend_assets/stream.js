@@ -20,7 +20,9 @@ export function applyFrame(f) {
   state.dirty = true;
 }
 
-// onEnd() is called when the server closes the stream (the run ended or the server went away).
+// onEnd() is called when the server closes the stream (the run ended or the server went away).  Returns a
+// promise that settles once the server sends frames to this page (or gave up): read the history after it,
+// so that no sample falls between the history and the first frame.
 export function connectStream(runId, onEnd) {
   closeStream();
   const proto = location.protocol === "https:" ? "wss" : "ws";
@@ -31,5 +33,11 @@ export function connectStream(runId, onEnd) {
     if (f.run_id !== state.runId) return;
     if (state.loading) state.held.push(f); else applyFrame(f);
   };
+  const opened = new Promise((resolve) => {
+    ws.onopen = resolve;
+    ws.onerror = resolve;
+    setTimeout(resolve, 5000);
+  });
   ws.onclose = () => { if (state.ws === ws) { state.ws = null; onEnd(); } };
+  return opened;
 }

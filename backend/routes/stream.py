@@ -32,14 +32,21 @@ async def stream(ws: WebSocket, run_id: str) -> None:
         await _deny(ws, 404, str(exc))
         return
     hub = manager.hub(run_id)
-    await ws.accept()
-    if hub is None:
+    # subscribed before the handshake completes: a page that reads the run's history once the stream is open
+    # gets every frame after it (none falls between the history and the first frame)
+    sub = hub.subscribe() if hub is not None else None
+    try:
+        await ws.accept()
+    except BaseException:
+        if hub is not None and sub is not None:
+            hub.unsubscribe(sub)
+        raise
+    if hub is None or sub is None:
         last = manager.last_frame(run_id)
         if last is not None:
             await ws.send_text(last)
         await ws.close(code=1000, reason="the run has ended")
         return
-    sub = hub.subscribe()
     send_timeout = ws.app.state.settings.client_send_timeout_s
 
     async def watch_disconnect() -> None:

@@ -66,7 +66,8 @@ def test_history_and_stream_give_every_event_once(tmp_path, small_cfg) -> None:
     # the windows moved to the change: its first sample, 950 K, t_E = 1.5 s
     t0 = mid["change"].json()["applied_t"]
     for w in (final["windows"], detail["windows"]):  # the run's record and the server's change log agree
-        assert w["setpoint"] == 950.0 and w["t0"] == pytest.approx(t0) and w["steady"] == pytest.approx([t0 + 2.25, t0 + 3.0])
+        assert w["setpoint"] == 950.0 and w["t0"] == pytest.approx(t0)
+        assert w["steady"] == pytest.approx([t0 + 2.25, t0 + 3.0])
 
 
 def test_frames_carry_spread_and_saturated_groups(tmp_path, small_cfg) -> None:
@@ -146,7 +147,8 @@ def test_csv_and_report_exports(tmp_path, small_cfg) -> None:
     assert f'filename="{run_id}-a-b-test.csv"' in r.headers["content-disposition"]
     rows = list(csv.reader(io.StringIO(r.text)))
     head, body = rows[0], rows[1:]
-    for col in ("t_s", "eta_m", "T_ref_K", "T_mean_hat_K", "TC4_K", "TC4_hat_K", "u_T1h", "u_ff_T2v", "T_sup_K", "spread_K"):
+    for col in ("t_s", "eta_m", "T_ref_K", "T_mean_hat_K", "TC4_K", "TC4_hat_K", "u_T1h", "u_ff_T2v", "T_sup_K",
+                "spread_K"):
         assert col in head, col
     assert len(body) == len(z["t"])
     np.testing.assert_allclose([float(row[head.index("T_mean_hat_K")]) for row in body], z["T_mean_hat"], rtol=1e-5)
