@@ -75,6 +75,21 @@ class ChangeRow:
     message: str | None
 
 
+def clean_label(label: str | None) -> str | None:
+    """A run's label as stored: one line with single spaces, ``None`` if blank; ``ValueError`` if longer than
+    ``MAX_LABEL_CHARS`` or not printable.
+
+    >>> clean_label("  fixed,\tTC4  middle "), clean_label(" ")
+    ('fixed, TC4 middle', None)
+    """
+    text = " ".join((label or "").split())
+    if len(text) > MAX_LABEL_CHARS:
+        raise ValueError(f"at most {MAX_LABEL_CHARS} characters, got {len(text)}")
+    if any(not c.isprintable() for c in text):
+        raise ValueError("only printable characters")
+    return text or None
+
+
 def _loads(text: str | None) -> Any:
     return None if text is None else json.loads(text)
 

@@ -101,9 +101,7 @@ class RunChecks:
         out: dict[str, Any] = {"verdict": "ok", "messages": [], "worst": None, "first_t": None, "best": None,
                                "hold_range": None}
         if report is not None:
-            out.update(report.to_json())
-            if report.verdict == "refuse":
-                out["messages"] = [refusal(report.messages)]
+            out.update(report.to_json())  # a refusal keeps its sentences as a list (the page lists them)
         if problem is not None:
             out.update(verdict="refuse", messages=[problem])
         return out

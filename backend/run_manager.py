@@ -19,7 +19,6 @@ import asyncio
 import concurrent.futures
 import dataclasses
 import logging
-import shutil
 import time
 import uuid
 from collections import OrderedDict
@@ -30,7 +29,7 @@ from typing import Any, TypeVar
 from backend.fanout import StreamHub
 from backend.frames import SnapshotLike, frame_json
 from backend.loop_factory import DefaultLoopFactory
-from backend.repository import ACTIVE_STATUSES, MAX_LABEL_CHARS, ChangeRow, RunRepository, RunRow
+from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow, clean_label
 from backend.run_checks import RunChecks
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_types import (  # noqa: F401  (re-exported: the routes and the UIs import them from here)
@@ -283,14 +282,12 @@ class RunManager:
 
     # ---- the runs list: label and delete ----
     def set_label(self, run_id: str, label: str | None) -> RunRow:
-        """Name a run (``None`` or blank: no name); at most ``MAX_LABEL_CHARS`` printable characters."""
+        """Name a run (``None`` or blank: no name; ``repository.clean_label``)."""
         self.run(run_id)
-        text = " ".join((label or "").split())  # one line, single spaces
-        if len(text) > MAX_LABEL_CHARS:
-            raise LimitExceeded(f"label: at most {MAX_LABEL_CHARS} characters, got {len(text)}")
-        if any(not c.isprintable() for c in text):
-            raise LimitExceeded("label: only printable characters")
-        self._repo.set_label(run_id, text or None)
+        try:
+            self._repo.set_label(run_id, clean_label(label))
+        except ValueError as exc:
+            raise LimitExceeded(f"label: {exc}") from None
         return self.run(run_id)
 
     def delete(self, run_id: str) -> None:
@@ -298,13 +295,9 @@ class RunManager:
         row = self.run(run_id)
         if run_id in self._runs or row.status in ACTIVE_STATUSES:
             raise RunIsActive(f"run {run_id} is {self.status(run_id) or row.status}: stop it before deleting it")
-        folder = self.files(run_id).folder
-        trash = folder.with_name(f".deleted-{run_id}")
-        if folder.is_dir():  # out of sight at once (rename), then removed
-            folder.rename(trash)
+        self.files(run_id).remove()
         self._repo.delete_run(run_id)
         self._last_frames.pop(run_id, None)
-        shutil.rmtree(trash, ignore_errors=True)
         log.info("run %s deleted", run_id)
 
     # ---- what the routes and the UIs read ----

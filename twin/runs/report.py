@@ -34,6 +34,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the server renders reports in worker threads
 from matplotlib.patches import Rectangle
+from matplotlib.transforms import Bbox
 
 from twin.physics.fillet import FILLET_X, FILLET_Y, Fillet
 from twin.runs.metrics import METRIC_KEYS, METRIC_WORDS, Windows, windows_of
@@ -86,12 +87,11 @@ def _metrics_table(ax: Axes, metrics: Mapping[str, Any], w: Windows) -> None:
     if not rows:
         ax.text(0, 1, "no metrics (the run ended before its windows)", va="top", fontsize=8)
         return
-    table = ax.table(cellText=rows, colLabels=["metric", "K", "% of setpoint"], loc="upper center",
-                     colLoc="left", cellLoc="left", colWidths=[0.62, 0.18, 0.2])
+    table = ax.table(cellText=rows, colLabels=["metric", "K", "%"], bbox=Bbox.from_bounds(0.0, 0.0, 1.0, 1.0),
+                     colLoc="left", cellLoc="left", colWidths=[0.70, 0.13, 0.17])
     table.auto_set_font_size(False)
-    table.set_fontsize(7.5)
-    table.scale(1.0, 1.15)
-    ax.set_title(f"metrics (relative to {w.setpoint:g} K)", fontsize=9, loc="left")
+    table.set_fontsize(6.8)
+    ax.set_title(f"metrics (% of {w.setpoint:g} K)", fontsize=9, loc="left")
 
 
 def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str = "") -> Figure:
@@ -100,8 +100,8 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     t_end = float(t[-1]) if t.size else 0.0
     w = windows_of(ts)
     fig = Figure(figsize=(11.69, 8.27))
-    grid = fig.add_gridspec(3, 3, height_ratios=[0.34, 1, 1], hspace=0.55, wspace=0.28,
-                            left=0.06, right=0.98, top=0.95, bottom=0.06)
+    grid = fig.add_gridspec(4, 3, height_ratios=[0.3, 1, 1, 0.32], hspace=0.6, wspace=0.3,
+                            left=0.06, right=0.98, top=0.95, bottom=0.02)
     head = fig.add_subplot(grid[0, :])
     head.axis("off")
     head.text(0, 1.0, title or "furnace-twin run", fontsize=13, weight="bold", va="top")
@@ -159,10 +159,13 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     ax.set(title=f"Estimated field at t = {t_end:.1f} s", xlabel="x (m), along the length", ylabel="y (m)")
 
     _metrics_table(fig.add_subplot(grid[2, 2]), metrics, w)
+    ax = fig.add_subplot(grid[3, :])
+    ax.axis("off")
     events = load_events(ts)
-    if events:
-        text = "\n".join(textwrap.shorten(f"{e.t:7.1f} s  {e.text}", 120) for e in events[-7:])
-        fig.text(0.06, 0.005, "events (last): \n" + text, fontsize=6.5, family="monospace", va="bottom")
+    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", 150) for e in events[-6:]]
+    more = f" (the last 6 of {len(events)})" if len(events) > 6 else ""
+    ax.text(0, 1, f"events{more}:\n" + ("\n".join(lines) if lines else "none recorded"), fontsize=7,
+            family="monospace", va="top")
     return fig
 
 
