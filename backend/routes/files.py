@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, status
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, Response
 
 from backend.deps import ManagerDep
 from backend.series import NoSeries, run_arrays, series_json
@@ -41,14 +42,17 @@ def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
     return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")
 
 
-@router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
+@router.get("/{run_id}/series", response_class=Response,
+            responses={200: {"content": {"application/json": {}}},
+                       404: {"description": "no such run or no time series yet"}})
 def series(run_id: str, manager: ManagerDep,
-           max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> dict[str, Any]:
+           max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> Response:
     """The run's time series so far as JSON (decimated to ``max_points``) for charts of any run: a running
     run's up to its latest sample, with every event, the live changes and the metric windows
     (``backend.series``)."""
-    try:
-        return series_json(run_arrays(manager, run_id), max_points)
+    try:  # serialised here, in the worker thread: a big answer never holds up the event loop (the streams)
+        body = json.dumps(series_json(run_arrays(manager, run_id), max_points), allow_nan=False, separators=(",", ":"))
+        return Response(body, media_type="application/json")
     except NoSeries as exc:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
     except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout

@@ -23,6 +23,7 @@ import viser
 from pydantic import ValidationError
 
 from backend.frames import SnapshotLike
+from backend.messages import field_path, plain_errors
 from backend.repository import ACTIVE_STATUSES, RunRow
 from backend.run_manager import RunManager
 from backend.viser.controls import AUTO, Controls, build_controls
@@ -165,10 +166,9 @@ class FurnaceView:
         assert self.gui is not None
         try:
             return self.manager.call_from_thread(make())
-        except ValidationError as exc:
-            self.gui.say("**refused:** " + "; ".join(
-                f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
-                for e in exc.errors()))
+        except ValidationError as exc:  # the same plain sentences as the REST API's 422s
+            self.gui.say("**refused:** " + "; ".join(f"{field_path(e['loc'])}: {e['msg']}"
+                                                     for e in plain_errors(exc.errors())))
         except Exception as exc:
             self.gui.say(f"**refused:** {exc}")
         return None

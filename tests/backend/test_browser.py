@@ -45,8 +45,9 @@ def _open_dashboard(browser, url: str):
     page.on("console", lambda m: errors.append(m.text)
             if m.type == "error" and "Failed to load resource" not in m.text else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url)
-    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')")
+    page.goto(url, timeout=120_000)  # plotly.js is 4.6 MB: slow to load on a loaded machine
+    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
+                           timeout=120_000)
     return page, errors
 
 
@@ -90,8 +91,11 @@ def test_dashboard_points_run_with_live_changes(server, browser, artifacts, smal
     assert all(v is not None for row in heat for v in row)
     t_ref = _js(page, "(() => { const d = document.getElementById('mean-plot').data[0];"
                       " return d.x.map((t, k) => [t, d.y[k]]); })()")
-    assert abs(min(t_ref, key=lambda p: abs(p[0] - 4.0))[1] - 700.0) < 1.0
     assert all(abs(T - 900.0) < 0.5 for t, T in t_ref if t >= 8.0)
+    # at 4 s exactly, from the run's series (the chart may miss a streamed sample on a loaded machine)
+    stored = httpx.get(f"{server.url}/api/runs/{run_id}/series", params={"max_points": 20000}, timeout=30).json()
+    k = min(range(len(stored["t"])), key=lambda i: abs(stored["t"][i] - 4.0))
+    assert stored["t"][k] == pytest.approx(4.0) and abs(stored["T_ref"][k] - 700.0) < 1.0
     assert _js(page, "document.getElementById('mean-plot').data[2].x") == [4.0, 8.0]
     t1 = _js(page, "document.getElementById('mean-plot').data[1].x.slice(-1)[0]")
     time.sleep(1.5)
@@ -179,7 +183,7 @@ def test_viser_follows_a_run_then_stop_from_dashboard(server, browser, artifacts
     dash.close()
 
     page.bring_to_front()
-    page.wait_for_selector("text=· stopped", timeout=60_000)  # the 3D view's status follows the run's end
+    page.wait_for_selector("text=· stopped", timeout=180_000)  # the 3D view's status follows the run's end
     path = artifacts / "viser.png"
     page.screenshot(path=str(path), timeout=180_000)
     # left: the axes gizmo (bottom-left corner); right: the GUI panel with its blue buttons
@@ -388,10 +392,16 @@ def test_double_click_on_start_starts_one_run(browser, tmp_path, small_cfg) -> N
         page, errors = _open_dashboard(browser, srv.url)
         page.fill("input[name=duration]", "600")
         page.fill("input[name=speed]", "1")
-        page.dblclick("#start-btn")
-        _wait_text(page, "#start-msg", "started")
-        page.wait_for_function("!document.getElementById('start-btn').disabled")  # disabled until the reply
-        page.click("#start-btn")  # once more right after the answer: the same form, the same request
+        page.dblclick("#start-btn")  # the second click lands on the disabled button
+        # the button is back at the reply: a click right after it (a slow double click) is the same request
+        page.evaluate("""() => new Promise((resolve) => {
+            const btn = document.getElementById('start-btn'), msg = document.getElementById('start-msg');
+            const tick = () => {
+                if (!btn.disabled && msg.textContent.includes('started')) { btn.click(); resolve(); }
+                else setTimeout(tick, 5);
+            };
+            tick();
+        })""")
         _wait_text(page, "#start-msg", "already started")
         runs = httpx.get(f"{srv.url}/api/runs", timeout=10).json()
         assert len(runs) == 1, [r["id"] for r in runs]
