@@ -43,3 +43,15 @@ def test_a_group_idling_at_zero_is_one_spell_reported_after_min_off() -> None:
     u = [0.0 if rng.random() < 0.8 else 0.01 for _ in range(200)]  # touches 0 four times in five, 20 s
     ev = _events(watch, t_s, u)
     assert len(ev) == 1 and "T3h off (0 %)" in ev[0][2] and ev[0][0] >= MIN_OFF_S - 1e-9
+    assert ev[0][1] == "info"  # off is reported, full power warned
+
+
+def test_groups_alike_in_one_sample_share_one_event() -> None:
+    """At a run's start every group is off while the slow start of the reference needs no heat: one event."""
+    watch = SaturationWatch(("T1h", "T2h", "T2v"), 0.1)
+    events = []
+    for k in range(100):  # 10 s: all off for 6 s, then T1h and T2h on, T2v still off
+        u = [0.0, 0.0, 0.0] if k < 60 else [0.3, 0.3, 0.0]
+        events += [e.text for e in watch.update(0.1 * k, u)]
+    assert events == ["T1h, T2h, T2v off (0 %) since t = 0.0 s: no headroom left to cool",
+                      "T1h, T2h on again since t = 6.0 s, after 6.0 s"]

@@ -68,10 +68,12 @@ class SaturationWatch:
         self._open: dict[int, _Episode] = {}
 
     def update(self, t: float, u: ArrayLike) -> list[RunEvent]:
-        """Flags of one sample at run time ``t`` (s); returns the events it causes (``warn`` when a group
-        saturates, ``info`` when it comes off)."""
-        events: list[RunEvent] = []
+        """Flags of one sample at run time ``t`` (s); returns the events it causes: ``warn`` when a group has
+        been at full power for ``MIN_FULL_S``, ``info`` when a group has been off for ``MIN_OFF_S`` and when a
+        reported spell ends.  Groups that start or end alike in the same sample share one event."""
         eps = 1e-9
+        started: dict[tuple[int, float], list[str]] = {}  # (bound, since) -> groups
+        ended: dict[tuple[int, float, float], list[str]] = {}  # (bound, left, duration) -> groups
         for j, flag in enumerate(bound_flags(u)[: len(self.names)].tolist()):
             ep = self._open.get(j)
             if ep is not None and flag == ep.bound:
@@ -80,18 +82,24 @@ class SaturationWatch:
                 del self._open[j]
                 if ep.reported:
                     left = ep.last + self.t_s
-                    what = "below full power" if ep.bound > 0 else "on"
-                    events.append(RunEvent(t, f"{self.names[j]} {what} again since t = {left:.1f} s, "
-                                              f"after {left - ep.since:.1f} s", "info"))
+                    ended.setdefault((ep.bound, round(left, 6), round(left - ep.since, 6)), []).append(self.names[j])
                 ep = None
             if flag and ep is None:
                 ep = self._open[j] = _Episode(flag, t, t)
             if ep is not None and not ep.reported and ep.last - ep.since >= self.min_s[ep.bound] - eps:
                 ep.reported = True
-                if ep.bound > 0:
-                    text = (f"{self.names[j]} at full power (100 %) since t = {ep.since:.1f} s: "
-                            "no headroom left to heat")
-                else:
-                    text = f"{self.names[j]} off (0 %) since t = {ep.since:.1f} s: no headroom left to cool"
-                events.append(RunEvent(t, text, "warn"))
+                started.setdefault((ep.bound, round(ep.since, 6)), []).append(self.names[j])
+        events = []
+        for (bound, since), names in started.items():
+            who = ", ".join(names)
+            if bound > 0:
+                events.append(RunEvent(t, f"{who} at full power (100 %) since t = {since:.1f} s: no headroom left "
+                                          "to heat", "warn"))
+            else:
+                events.append(RunEvent(t, f"{who} off (0 %) since t = {since:.1f} s: no headroom left to cool",
+                                       "info"))
+        for (bound, left, duration), names in ended.items():
+            what = "below full power" if bound > 0 else "on"
+            events.append(RunEvent(t, f"{', '.join(names)} {what} again since t = {left:.1f} s, after "
+                                      f"{duration:.1f} s", "info"))
         return events
