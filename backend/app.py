@@ -23,11 +23,12 @@ from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
-from backend.messages import plain_errors
+from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, exports, files, furnace, glossary, health, runs, stream
+from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream
 from backend.run_manager import (
+    InsufficientStorage,
     LimitExceeded,
     RequestConflict,
     RunIsActive,
@@ -36,7 +37,8 @@ from backend.run_manager import (
     RunNotFound,
     TooManyRuns,
 )
-from backend.run_worker import ChangeRejected, LoopFactory
+from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
+from backend.security import SecurityMiddleware
 from backend.settings import Settings
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
@@ -51,18 +53,14 @@ ERRORS: dict[type[Exception], int] = {
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
+    ChangeCancelled: status.HTTP_409_CONFLICT,
+    InsufficientStorage: status.HTTP_507_INSUFFICIENT_STORAGE,
 }
 
 
 async def _error(request: Request, exc: Exception) -> JSONResponse:
     code = next(c for t, c in ERRORS.items() if isinstance(exc, t))
     return JSONResponse({"detail": str(exc) or type(exc).__name__}, status_code=code)
-
-
-async def _invalid(request: Request, exc: Exception) -> JSONResponse:
-    """A 422 in FastAPI's shape (``detail``: ``[{loc, msg, type}]``), each message in plain words."""
-    errors = exc.errors() if isinstance(exc, RequestValidationError) else []
-    return JSONResponse({"detail": plain_errors(errors)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
 def create_app(
@@ -87,14 +85,17 @@ def create_app(
         recover_interrupted(repo, settings.runs_dir)
         manager = RunManager(settings, cfg, repo, loop_factory, limits=limits,
                              event_loop=asyncio.get_running_loop())
+        await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
         app.state.manager = manager
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
             from backend.viser import FurnaceView
 
-            # always loopback: the 3D view has no token check, so it must not be reachable from the network
-            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port)
+            # always loopback; its gate checks Host and Origin, and with a token only windows that entered it act
+            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port, token=settings.api_token,
+                                allowed_hosts=tuple(settings.allowed_hosts),
+                                allowed_origins=tuple(settings.allowed_origins))
             scene.start()
             app.state.viser_url = scene.url
         app.state.viser = scene
@@ -112,11 +113,14 @@ def create_app(
         description="Live digital twin of the oscillating infrared annealing furnace "
         "(Jadachowski, Steinboeck, Kugi, CEP 78, 2018): runs, live stream, recordings.",
         lifespan=lifespan,
+        docs_url=None,  # backend/routes/docs.py: the same pages with their scripts from an installed package
+        redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, glossary, runs, files, exports, stream, dashboard):
+    for module in (health, furnace, glossary, runs, files, exports, stream, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
-    app.add_exception_handler(RequestValidationError, _invalid)
+    app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
+    app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

@@ -93,6 +93,14 @@ def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     }
 
 
+def frame_extra(s: SnapshotLike, fillet: Any) -> dict[str, Any]:
+    """What the server adds to a frame: ``spread`` (max over the fillet |T_hat - fillet mean|, K, with a
+    ``twin.physics.fillet.Fillet``) and ``saturated`` (+1 full power, -1 off, 0 between, per group)."""
+    from twin.control.saturation import bound_flags
+
+    return {"spread": finite_or_none(fillet.spread(s.field_hat)), "saturated": bound_flags(s.u).tolist()}
+
+
 def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
                events: list[str] | None = None, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample

@@ -78,9 +78,16 @@ def field_path(loc: Sequence[Any]) -> str:
     return " › ".join(parts) if parts else "body"
 
 
+SHOWN_CHARS = 40  # a value quoted in a message is cut to this many characters (a message never echoes a big input)
+
+
 def _shown(value: Any) -> str:
     if isinstance(value, str):
+        if len(value) > SHOWN_CHARS:
+            return f"'{value[:SHOWN_CHARS]}…' ({len(value)} characters)"
         return f"'{value}'" if value else "an empty text"
+    if isinstance(value, float) and value != value:
+        return "NaN"
     if value is None:
         return "nothing (null)"
     if isinstance(value, bool):
@@ -89,7 +96,7 @@ def _shown(value: Any) -> str:
         return f"a list of {len(value)}"
     if isinstance(value, dict):
         return "an object"
-    return str(value)
+    return str(value)[:SHOWN_CHARS]
 
 
 def plain_message(e: Mapping[str, Any]) -> str:
@@ -150,7 +157,7 @@ def _union_message(group: list[Mapping[str, Any]], name: str) -> str:
 
 
 def plain_errors(errors: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Validation errors as ``[{loc, msg, type}]`` with plain messages, one per field location."""
+    """Validation errors as ``[{loc, msg, type, input}]`` with plain messages, one per field location."""
     groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for e in errors:
         groups.setdefault(tuple(clean_loc(e.get("loc", ()))), []).append(e)
@@ -162,5 +169,8 @@ def plain_errors(errors: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
             msg = _union_message(group, name)
         else:
             msg = "; ".join(dict.fromkeys(plain_message(e) for e in group))
-        out.append({"loc": list(loc), "msg": msg, "type": str(group[0].get("type", ""))})
+        one: dict[str, Any] = {"loc": list(loc), "msg": msg, "type": str(group[0].get("type", ""))}
+        if "input" in group[0]:
+            one["input"] = group[0]["input"]  # as given (the 422 handler shortens it)
+        out.append(one)
     return out

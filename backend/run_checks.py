@@ -15,6 +15,7 @@ from backend.run_types import LimitExceeded
 from backend.run_worker import ChangeRejected, LoopFactory
 from backend.settings import Settings
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget
 from twin.limits import ScenarioLimits
 from twin.scenario import OscillationSpec, Reference, Scenario, check
 
@@ -74,6 +75,13 @@ class RunChecks:
         if callable(reachable):  # off the event loop: the first call may load the radiation model
             try:
                 await asyncio.to_thread(reachable, self.cfg, scenario.reference)
+            except ValueError as exc:
+                raise LimitExceeded(f"reference: {exc}") from None
+        check_plan = getattr(self.loop_factory, "check_plan", None)
+        if callable(check_plan):  # the first plan within this server's time and memory (twin.control.budget)
+            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
+            try:
+                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
 

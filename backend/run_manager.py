@@ -7,7 +7,7 @@ run's own single-thread executor, then publishes the latest snapshot as a stream
 
 The routes and both UIs use only the public methods below (start / launch, stop, change,
 set_label, delete; run, runs, changes, status, latest, in_force, scenario, live_runs,
-live_series, live_events; files, hub, last_frame; call_from_thread for a UI on another
+live_series; files, hub, last_frame; call_from_thread for a UI on another
 thread).  Scenarios and changes are checked (``backend.run_checks``: the furnace's limits,
 the reachable range, the reference's feasibility) before they reach a run.  Each run's
 events (``RunWorker.events``) go out once each, in the frames' ``event_log``.
@@ -27,13 +27,14 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from backend.fanout import StreamHub
-from backend.frames import SnapshotLike, frame_json
+from backend.frames import SnapshotLike, frame_extra, frame_json
 from backend.loop_factory import DefaultLoopFactory
 from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow, clean_label
 from backend.run_checks import RunChecks
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_types import (  # noqa: F401  (re-exported: the routes and the UIs import them from here)
     InForce,
+    InsufficientStorage,
     LimitExceeded,
     LiveSample,
     RequestConflict,
@@ -47,9 +48,10 @@ from backend.run_types import (  # noqa: F401  (re-exported: the routes and the 
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
 from backend.start_requests import RequestReused, StartRequests
+from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
-from twin.runs.record import RunEvent
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -96,15 +98,13 @@ class RunManager:
         self._shutting_down = False
         self._requests: StartRequests[Started] = StartRequests()  # a repeated POST gets the same run
         self.checks = RunChecks(cfg, self.limits, settings, self.loop_factory)
+        #: the data directory's usage, quota, free space and retention (backend.storage)
+        self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
     def files(self, run_id: str) -> RunFiles:
         return RunFiles(self.settings.runs_dir / run_id)
 
     # ---- start ----
-    def check_limits(self, scenario: Scenario) -> None:
-        """Raise :class:`LimitExceeded` if the scenario lies outside the furnace's or this server's limits."""
-        self.checks.limits_of(scenario)
-
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id (:meth:`launch` without a request id)."""
         return (await self.launch(scenario)).run_id
@@ -127,6 +127,12 @@ class RunManager:
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
+        await asyncio.to_thread(self.disk.apply_retention, self._repo, self.settings.runs_dir)
+        need = run_bytes(self.cfg, scenario.duration, self.settings.recording_image_interval_s)
+        need += sum(run_bytes(self.cfg, a.worker.scenario.duration) for a in self._runs.values())  # still to come
+        problem = await asyncio.to_thread(self.disk.room_for, need)
+        if problem is not None:
+            raise InsufficientStorage(problem)
         self._loop = asyncio.get_running_loop()
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
@@ -134,7 +140,7 @@ class RunManager:
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
-                           notes=notes)
+                           disk=self.disk, notes=notes)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
@@ -158,7 +164,7 @@ class RunManager:
         run.sent_events = first + len(new)
         log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(new)]
         return frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=status,
-                          events=[e.text for e in new], extra={"event_log": log_entries, **w.frame_extra(snap)})
+                          events=[e.text for e in new], extra={"event_log": log_entries, **frame_extra(snap, w.fillet)})
 
     def _publish(self, run_id: str, run: ActiveRun) -> None:
         w = run.worker
@@ -215,6 +221,9 @@ class RunManager:
             final = "interrupted"
             error = "the server shut down during the run"
             raise
+        except PlanCancelled:  # stopped (or shut down) while the first plan was being made
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down during the run" if self._shutting_down else None
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"
@@ -253,9 +262,10 @@ class RunManager:
         run.wake.set()
 
     async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned.
-
-        A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
+        """Queue a reference / oscillation change; wait (bounded) until it is in force (``applied``), a later
+        change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in the
+        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`;
+        one outside the furnace's limits, or a reference the furnace cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
         if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
@@ -353,12 +363,7 @@ class RunManager:
         """The time series of a run this server drives, up to its latest sample (``timeseries.npz`` layout);
         ``None`` if it drives no such run or it has no sample yet.  Any thread."""
         run = self._runs.get(run_id)
-        return None if run is None else run.worker.series()
-
-    def live_events(self, run_id: str) -> list[RunEvent] | None:
-        """The events of a run this server drives so far (``None`` if it drives none)."""
-        run = self._runs.get(run_id)
-        return None if run is None else list(run.worker.events)
+        return None if run is None else run.worker.live_series()
 
     def hub(self, run_id: str) -> StreamHub | None:
         run = self._runs.get(run_id)

@@ -22,6 +22,10 @@ class TooManyRuns(RuntimeError):
     """``max_concurrent_runs`` runs are already going (429)."""
 
 
+class InsufficientStorage(RuntimeError):
+    """The data directory's quota or the disk's free space has no room for the run (507)."""
+
+
 class LimitExceeded(ValueError):
     """The scenario asks for more than the furnace or the server allows (amplitude, run length, speed,
     a reference the furnace cannot follow) (422)."""

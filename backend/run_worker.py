@@ -5,30 +5,43 @@ writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its dat
 rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
 each call steps the loop as far as the speed allows (real time x factor, or as fast as
 possible) for at most a small wall-time budget and returns the latest snapshot.
-Reference / oscillation changes are queued and applied between two samples, in this
-thread (they re-plan, which may take seconds), never on the event loop.
+Reference / oscillation changes are queued and handed to the loop between two samples, in this
+thread, never on the event loop.  A loop that re-plans in the background returns a future per
+change (``twin.runs.replanning``): the change is ``pending`` until its plan is in force
+(``applied``, with the run time), and ends ``superseded`` (a later change of the same kind won),
+``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run ended first).
+Every plan of the run has a budget (``Settings.plan_max_s``, ``plan_max_mb``) and is cancelled by
+the run's stop event, also while the run is starting.
+
+The worker keeps the run's events (``backend.run_events``: the loop's and the server's), each added once
+in the worker thread to its list, the loop's run record (``timeseries.npz``) and the recording.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from backend.frames import SnapshotLike, events_of, finite_or_none, json_safe, scalar_values
+from backend.frames import SnapshotLike, events_of, json_safe, scalar_values
 from backend.recording import RecordingSink
 from backend.repository import RunRepository
+from backend.run_events import RunEvents, end_event
 from backend.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.settings import Settings
+from backend.storage import DataDir
 from twin.config import FurnaceConfig
-from twin.control.saturation import SaturationWatch, bound_flags
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.physics.fillet import Fillet
 from twin.runs.record import RunEvent, event_arrays
+from twin.runs.replanning import Superseded
+from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
@@ -42,20 +55,32 @@ class LoopLike(Protocol):
 
     def step(self) -> Any: ...
 
-    def set_reference(self, ref: Reference) -> None: ...
+    def set_reference(self, ref: Reference) -> Future[float] | None: ...
 
-    def set_oscillation(self, spec: OscillationSpec) -> None: ...
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float] | None: ...
 
     def timeseries(self) -> dict[str, Any]: ...
 
     def metrics(self) -> dict[str, Any]: ...
 
 
-LoopFactory = Callable[[FurnaceConfig, Scenario], LoopLike]
+class LoopFactory(Protocol):
+    """Builds a run's loop; its first plan keeps to ``budget`` and stops when the budget is cancelled."""
+
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike: ...
 
 
 class ChangeRejected(ValueError):
-    """The loop refused a change (e.g. an unreachable reference)."""
+    """The loop refused a change, or could not plan it (an unreachable reference, a plan beyond the
+    server's time or memory, a failed solve); nothing of it was applied."""
+
+
+class DiskFull(RuntimeError):
+    """The data directory passed its quota, or the disk its free-space reserve, during the run."""
+
+
+class ChangeCancelled(RuntimeError):
+    """The run ended before the change was planned; nothing of it was applied."""
 
 
 @dataclass(frozen=True)
@@ -80,11 +105,6 @@ class _Change:
     notes: tuple[str, ...] = ()  # feasibility warnings, reported as events when the change applies
 
 
-#: what a run's own end is called in its events
-END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
-             "error": "run failed"}
-
-
 class RunWorker:
     """Steps one closed loop at the scenario's speed and persists what it produces."""
 
@@ -97,9 +117,12 @@ class RunWorker:
         repo: RunRepository,
         files: RunFiles,
         loop_factory: LoopFactory,
+        *,
+        disk: DataDir | None = None,
         notes: tuple[str, ...] = (),
     ) -> None:
         self.run_id = run_id
+        self.disk = disk
         self.scenario = scenario
         self.cfg = cfg
         self.settings = settings
@@ -120,25 +143,32 @@ class RunWorker:
         self._origin_wall = 0.0
         self._origin_t = 0.0
         self._last_flush = 0.0
-        #: the run's events, oldest first (appended in the worker thread; readers take len() then slice)
-        self.events: list[RunEvent] = []
+        self.series = SeriesStore(files.folder)  # the time series, appended at each flush
+        self._events = RunEvents(tuple(g.name for g in cfg.lamps.groups), cfg.sampling.t_s)
+        self.events = self._events.items  #: the run's events, oldest first (backend.run_events)
         self._notes = notes
-        self._saturation = SaturationWatch([g.name for g in cfg.lamps.groups], cfg.sampling.t_s)
-        self._fillet = Fillet.of(cfg)
+        self.fillet = Fillet.of(cfg)  # for the frames' spread (backend.frames.frame_extra)
 
-    # ---- events (worker thread) ----
-    def add_event(self, t: float, text: str, level: str = "info") -> None:
-        """One report of the run: kept for the stream, the time series and the recording."""
+    # ---- events ----
+    def add_event(self, t: float, text: str, level: str = "info", *, in_record: bool = False) -> None:
+        """One report of the run (worker thread): kept for the stream, the run record (``in_record``: the loop
+        put it there already) and the recording."""
         event = RunEvent(float(t), text, level)
         self.events.append(event)
+        note = getattr(getattr(self.loop, "record", None), "add_event", None)
+        if not in_record and callable(note):
+            note(event)
         if self.recording is not None:
             self.recording.log_event(event.t, event.text, event.level)
 
-    def frame_extra(self, snap: SnapshotLike) -> dict[str, Any]:
-        """What a frame carries beyond the snapshot: the spread about the fillet mean (K) and the groups at
-        a bound (+1 full power, -1 off)."""
-        return {"spread": finite_or_none(self._fillet.spread(snap.field_hat)),
-                "saturated": bound_flags(snap.u).tolist()}
+    def _add_later(self, t: float | None, text: str, level: str) -> None:
+        """An event from another thread (a change settled by the re-planning thread): added at the next step."""
+        at = t if t is not None else (float(self.latest.t) if self.latest is not None else 0.0)
+        self._events.later(RunEvent(float(at), text, level))
+
+    def _add_queued(self) -> None:
+        for e in self._events.queued():
+            self.add_event(e.t, e.text, e.level)
 
     # ---- set-up (worker thread) ----
     def build(self) -> None:
@@ -149,7 +179,9 @@ class RunWorker:
             tc_positions=self.cfg.tc_positions(self.scenario.tc4),
             image_interval=self.settings.recording_image_interval_s,
         )
-        self.loop = self._factory(self.cfg, self.scenario)
+        self.loop = self._factory(self.cfg, self.scenario, budget=self.budget())
+        if self.stop_requested.is_set():  # stopped while the first plan was being made
+            raise PlanCancelled("the run was stopped while it was starting")
         sc = self.scenario
         speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
         self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
@@ -158,6 +190,10 @@ class RunWorker:
             self.add_event(0.0, f"feasibility: {note}", "warn")
         self._rebase(0.0)
         self._last_flush = time.monotonic()
+
+    def budget(self) -> PlanBudget:
+        """The plans' budget: this server's limits, cancelled by the run's stop."""
+        return PlanBudget.of(self.settings.plan_max_s, self.settings.plan_max_mb, self.stop_requested)
 
     def _rebase(self, t: float) -> None:
         """Real-time pacing restarts from now at simulated time ``t`` (after set-up or a re-plan)."""
@@ -173,6 +209,7 @@ class RunWorker:
         return fut
 
     def _apply_changes(self) -> bool:
+        """Hand the queued changes to the loop; True if one was applied at once (a loop without futures)."""
         assert self.loop is not None
         applied = False
         while True:
@@ -180,44 +217,72 @@ class RunWorker:
                 if not self._changes:
                     return applied
                 ch = self._changes.popleft()
-            # the first sample that uses the change (the loop counts a new reference's times from it)
+            # the first sample that could use the change
             t = float(self.latest.t) + self.cfg.sampling.t_s if self.latest is not None else 0.0
             t0 = time.monotonic()
             try:
                 if ch.kind == "reference":
-                    self.loop.set_reference(ch.value)
-                    self.reference = ch.value
+                    fut = self.loop.set_reference(ch.value)
                 else:
-                    self.loop.set_oscillation(ch.value)
-                    self.oscillation = ch.value
-            except ValueError as exc:
-                self.repo.finish_change(ch.change_id, "rejected", t, str(exc))
-                self.add_event(t, f"{ch.kind} change to {describe(ch.value)} refused: {exc}", "warn")
-                ch.future.set_exception(ChangeRejected(str(exc)))
+                    fut = self.loop.set_oscillation(ch.value)
+            except Exception as exc:  # refused or failed before anything changed: the run goes on as it was
+                self._settle(ch, t0, exc=exc, t=t)
                 continue
-            except Exception as exc:  # the run goes on with its old plan
-                log.exception("run %s: %s change failed", self.run_id, ch.kind)
-                self.repo.finish_change(ch.change_id, "failed", t, repr(exc))
-                self.add_event(t, f"{ch.kind} change to {describe(ch.value)} failed, the run keeps its plan: "
-                                  f"{exc}", "error")
-                ch.future.set_exception(exc)
-                continue
-            for note in ch.notes:
-                self.add_event(t, f"feasibility: {note}", "warn")
+            if fut is None:  # a loop that applies at once
+                self._settle(ch, t0, t=t)
+                applied = True
+            else:
+                fut.add_done_callback(functools.partial(self._settled_future, ch, t0))
+        return applied
+
+    def _settled_future(self, ch: _Change, t0: float, fut: Future[float]) -> None:
+        exc = fut.exception()
+        self._settle(ch, t0, exc=exc, t=None if exc is not None else fut.result())
+
+    def _settle(self, ch: _Change, t0: float, *, exc: BaseException | None = None, t: float | None = None) -> None:
+        """Record the outcome of a change and answer whoever waits for it."""
+        if ch.future.done():
+            return
+        if exc is None:
+            if ch.kind == "reference":
+                self.reference = ch.value
+            else:
+                self.oscillation = ch.value
             replan_s = time.monotonic() - t0
-            log.info("run %s: %s changed at t=%.1f s (re-plan %.2f s)", self.run_id, ch.kind, t, replan_s)
+            log.info("run %s: %s change %d in force from t=%.1f s (%.2f s after it was handed over)",
+                     self.run_id, ch.kind, ch.change_id, t, replan_s)
             self.repo.finish_change(ch.change_id, "applied", t, None)
+            for note in ch.notes:
+                self._add_later(t, f"feasibility: {note}", "warn")
             ch.future.set_result({"status": "applied", "applied_t": t, "replan_s": replan_s})
-            applied = True
+            return
+        what = f"{ch.kind} change to {describe(ch.value)}"
+        if isinstance(exc, Superseded):
+            self.repo.finish_change(ch.change_id, "superseded", None, str(exc))
+            self._add_later(None, f"{what} superseded: {exc}", "info")
+            ch.future.set_result({"status": "superseded", "applied_t": None, "message": str(exc)})
+        elif isinstance(exc, PlanCancelled):
+            self.repo.finish_change(ch.change_id, "cancelled", None, str(exc))
+            self._add_later(None, f"{what} cancelled: {exc}", "warn")
+            ch.future.set_exception(ChangeCancelled(str(exc)))
+        elif isinstance(exc, ValueError):  # unreachable, or beyond this server's plan limits
+            self.repo.finish_change(ch.change_id, "rejected", t, str(exc))
+            self._add_later(t, f"{what} refused: {exc}", "warn")
+            ch.future.set_exception(ChangeRejected(str(exc)))
+        else:  # the solve failed: the run goes on with its old plan
+            log.warning("run %s: %s change %d failed: %r", self.run_id, ch.kind, ch.change_id, exc)
+            message = f"re-planning failed, the run goes on as before: {exc}"
+            self.repo.finish_change(ch.change_id, "failed", None, message)
+            self._add_later(t, f"{what}: {message}", "error")
+            ch.future.set_exception(ChangeRejected(message))
 
     def cancel_changes(self, reason: str) -> None:
         with self._changes_lock:
             pending, self._changes = list(self._changes), deque()
         for ch in pending:
             self.repo.finish_change(ch.change_id, "cancelled", None, reason)
-            self.add_event(float(self.latest.t) if self.latest is not None else 0.0,
-                           f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
-            ch.future.set_exception(ChangeRejected(reason))
+            self._add_later(None, f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
+            ch.future.set_exception(ChangeCancelled(reason))
 
     # ---- stepping (worker thread) ----
     def _finished(self) -> bool:
@@ -234,9 +299,16 @@ class RunWorker:
         samples: list[tuple[SnapshotLike, int, float]] = []
         t_s = self.cfg.sampling.t_s
         wait = 0.0
+        self._add_queued()
         while not self.stop_requested.is_set() and not self._finished():
             if self._apply_changes():
                 self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
+            if self.speed is None and getattr(self.loop, "replanning", False):
+                # at speed max simulated time waits for a re-plan (free here), so the plan is not stale
+                # when it comes in and a change counts from the sample it was asked at; in real time
+                # the furnace goes on under the old plan
+                wait = 0.02
+                break
             next_t = (float(self.latest.t) if self.latest is not None else 0.0) + t_s
             if self.speed is not None:
                 due = self._origin_wall + (next_t - self._origin_t) / self.speed
@@ -250,15 +322,19 @@ class RunWorker:
             samples.append((snap, self.seq, self.latest_wall))
             if self.recording is not None:
                 self.recording.add(snap)
-            for text in events_of(snap.events):
-                self.add_event(float(snap.t), text, "warn" if "failed" in text else "info")
-            for event in self._saturation.update(float(snap.t), snap.u):
+            self._add_queued()
+            for text in events_of(snap.events):  # the loop put them into its record with the sample
+                self.add_event(float(snap.t), text, "warn" if "failed" in text else "info", in_record=True)
+            for event in self._events.saturation.update(float(snap.t), snap.u):
                 self.add_event(event.t, event.text, event.level)
             wait = 0.0
             if time.monotonic() - start >= budget_s:
                 break
         if time.monotonic() - self._last_flush >= self.settings.flush_interval_s:
             self.flush()
+            problem = None if self.disk is None else self.disk.over()
+            if problem is not None:
+                raise DiskFull(f"{problem}: the run was stopped, its data so far kept")
         return Advance(self.latest, self.seq, self.latest_wall, steps, tuple(samples), self._finished(),
                        max(wait, 0.0))
 
@@ -268,18 +344,26 @@ class RunWorker:
             return None
         data = dict(self.loop.timeseries())
         data.setdefault("scenario", self.scenario.to_json())
-        data.update(event_arrays(list(self.events)))  # the loop's events and the server's own
+        if not callable(getattr(getattr(self.loop, "record", None), "add_event", None)):
+            data.update(event_arrays(list(self.events)))  # a loop without a record of its own: the worker's
         return data
 
-    def series(self) -> dict[str, Any] | None:
-        """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush; any thread."""
-        return self._timeseries()
-
-    def flush(self, metrics: dict[str, Any] | None = None) -> None:
-        """Write the time series so far, the latest values and the recording's buffer to disk."""
-        self._last_flush = time.monotonic()
+    def live_series(self) -> dict[str, Any] | None:
+        """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush, with the events
+        numbered as the frames number them (this worker's list); any thread."""
         data = self._timeseries()
         if data is not None:
+            data.update(event_arrays(list(self.events)))
+        return data
+
+    def flush(self, metrics: dict[str, Any] | None = None) -> None:
+        """Append the new samples to the time series (``twin.runs.series_store``), store the latest values and
+        push the recording's buffer to disk."""
+        self._last_flush = time.monotonic()
+        record = getattr(self.loop, "record", None)
+        if record is not None and self.latest is not None:
+            self.series.append(record)
+        elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
             write_npz_atomic(self.files.timeseries, data)
         if self.recording is not None:
             self.recording.flush()
@@ -289,12 +373,10 @@ class RunWorker:
     def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
         """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
         far (``None`` entries where a window was not reached)."""
+        self._add_queued()
         if status is not None:
-            t = float(self.latest.t) if self.latest is not None else 0.0
-            words = END_WORDS.get(status, f"run {status}")
-            at = f" at t = {t:.1f} s" if status != "finished" else ""
-            self.add_event(t, f"{words}{at}{f': {error}' if error else ''}",
-                           "error" if status == "error" else ("warn" if status == "interrupted" else "info"))
+            end = end_event(status, float(self.latest.t) if self.latest is not None else 0.0, error)
+            self.add_event(end.t, end.text, end.level)
         metrics: dict[str, Any] | None = None
         if self.loop is not None and self.latest is not None:
             try:
@@ -305,6 +387,7 @@ class RunWorker:
             write_json_atomic(self.files.metrics, metrics)
         try:
             self.flush(metrics)
+            consolidate(self.files.folder, self.files.timeseries)  # timeseries.npz of product.md
         finally:
             if self.recording is not None:
                 self.recording.close()

@@ -28,6 +28,7 @@ from twin.control.saturation import bound_flags
 from twin.physics.fillet import Fillet
 from twin.runs.metrics import windows_of
 from twin.runs.record import load_arrays, load_changes, load_events
+from twin.runs.series_store import has_parts, load_parts
 
 SCALARS = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 
@@ -99,7 +100,10 @@ def run_arrays(manager: Any, run_id: str) -> Mapping[str, Any]:
     live = manager.live_series(run_id)
     if live is not None:
         return live
-    path: Path = manager.files(run_id).timeseries
+    files = manager.files(run_id)
+    if has_parts(files.folder):  # stored in parts, not yet consolidated (twin.runs.series_store)
+        return load_parts(files.folder)
+    path: Path = files.timeseries
     if not path.is_file():
         raise NoSeries(f"run {run_id} has no samples yet")
     return load_arrays(path)

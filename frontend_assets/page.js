@@ -36,6 +36,7 @@ export function describeReference(ref) {
 // Short form for tables: "1100 K / 120 s" or "3 pts → 1100 K".
 export function shortReference(ref) {
   if (!ref) return "–";
+  if (typeof ref.points === "number") return `${ref.points} pt${ref.points > 1 ? "s" : ""} \u2192 ${fmt(ref.setpoint, 0)} K`; // a list's summary
   if (ref.points) return `${ref.points.length} pt${ref.points.length > 1 ? "s" : ""} \u2192 ${fmt(ref.points[ref.points.length - 1][1], 0)} K`;
   return `${fmt(ref.setpoint, 0)} K / ${fmt(ref.t_E, 0)} s`;
 }

@@ -1,5 +1,6 @@
 // The shown run's websocket stream (WS /api/runs/{id}/stream): frames into the series, events into the log.
 // While the run's history is being read (state.loading) frames are held, then replayed after it.
+import { token } from "./api.js";
 import { addEvents, noteStatus } from "./events.js";
 import { $, badge, fmt, LIVE } from "./page.js";
 import { pushFrame } from "./series.js";
@@ -26,7 +27,9 @@ export function applyFrame(f) {
 export function connectStream(runId, onEnd) {
   closeStream();
   const proto = location.protocol === "https:" ? "wss" : "ws";
-  const ws = new WebSocket(`${proto}://${location.host}/api/runs/${runId}/stream`);
+  // a browser cannot set headers on a websocket: the token rides as a subprotocol (never in the URL)
+  const protocols = token() ? ["furnace-twin", `token.${token()}`] : [];
+  const ws = new WebSocket(`${proto}://${location.host}/api/runs/${runId}/stream`, protocols);
   state.ws = ws;
   ws.onmessage = (ev) => {
     const f = JSON.parse(ev.data);

@@ -8,9 +8,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse, Response
+from starlette.background import BackgroundTask
 
 from backend.deps import ManagerDep
 from backend.series import NoSeries, run_arrays, series_json
+from twin.runs.series_store import has_parts, snapshot_file
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
 
@@ -19,6 +21,8 @@ def _file(run_id: str, manager: ManagerDep, which: str) -> Path:
     manager.run(run_id)  # 404 unless the id comes from the database, before it names a folder
     files = manager.files(run_id)
     path: Path = getattr(files, which)
+    if which == "timeseries" and has_parts(files.folder):  # a run in progress: its parts so far, as one file
+        return snapshot_file(files.folder, path)
     if not path.is_file():
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {path.name} (yet)")
     return path
@@ -39,7 +43,9 @@ def recording(run_id: str, manager: ManagerDep) -> FileResponse:
 def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
     """The raw time series (``.npz``, layout in product.md), flushed every few seconds while running."""
     path = _file(run_id, manager, "timeseries")
-    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")
+    cleanup = BackgroundTask(path.unlink, missing_ok=True) if path.name.startswith(".timeseries-") else None
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz",
+                        background=cleanup)
 
 
 @router.get("/{run_id}/series", response_class=Response,
@@ -51,7 +57,8 @@ def series(run_id: str, manager: ManagerDep,
     run's up to its latest sample, with every event, the live changes and the metric windows
     (``backend.series``)."""
     try:  # serialised here, in the worker thread: a big answer never holds up the event loop (the streams)
-        body = json.dumps(series_json(run_arrays(manager, run_id), max_points), allow_nan=False, separators=(",", ":"))
+        body = json.dumps(series_json(run_arrays(manager, run_id), max_points), allow_nan=False,
+                          separators=(",", ":"))
         return Response(body, media_type="application/json")
     except NoSeries as exc:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None

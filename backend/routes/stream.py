@@ -10,6 +10,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from fastapi.responses import PlainTextResponse
 
 from backend.run_manager import RunManager, RunNotFound
+from backend.security import STREAM_SUBPROTOCOL, TOKEN_SUBPROTOCOL
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/runs", tags=["stream"])
@@ -35,8 +36,11 @@ async def stream(ws: WebSocket, run_id: str) -> None:
     # subscribed before the handshake completes: a page that reads the run's history once the stream is open
     # gets every frame after it (none falls between the history and the first frame)
     sub = hub.subscribe() if hub is not None else None
+    # a browser sends its token as a subprotocol (backend.security); answer with ours, never the token
+    offered = ws.scope.get("subprotocols") or []
     try:
-        await ws.accept()
+        await ws.accept(subprotocol=STREAM_SUBPROTOCOL if STREAM_SUBPROTOCOL in offered or any(
+            p.startswith(TOKEN_SUBPROTOCOL) for p in offered) else None)
     except BaseException:
         if hub is not None and sub is not None:
             hub.unsubscribe(sub)

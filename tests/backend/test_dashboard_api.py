@@ -24,7 +24,8 @@ RUN = {"duration": 6.0, "speed": 4.0, "reference": {"setpoint": 900.0, "t_E": 3.
 
 
 def make_client(tmp_path: Path, cfg, factory=None) -> TestClient:
-    return TestClient(create_app(Settings(data_dir=tmp_path / "data"), cfg, loop_factory=factory or fake_factory()))
+    return TestClient(create_app(Settings(data_dir=tmp_path / "data"), cfg, loop_factory=factory or fake_factory()),
+                      base_url="http://127.0.0.1")
 
 
 class SlowCheckFactory(FakeFactory):

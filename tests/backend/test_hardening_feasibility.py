@@ -18,7 +18,8 @@ from backend.settings import Settings
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory, small_cfg):
-    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("absurd")), small_cfg)) as c:
+    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("absurd")), small_cfg),
+                    base_url="http://127.0.0.1") as c:
         yield c
 
 

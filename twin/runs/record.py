@@ -246,6 +246,43 @@ class RunRecord:
         out.update(change_arrays(self._changes))
         return out
 
+    def add_event(self, event: RunEvent) -> None:
+        """An event that is not a sample's (the server's: the start, refused changes, saturated groups, the end)."""
+        self._events.append(event)
+
+    @property
+    def n_events(self) -> int:
+        return len(self._events)
+
+    @property
+    def n_changes(self) -> int:
+        return len(self._changes)
+
+    def tail(self, start: int, events_from: int | None = None, changes_from: int = 0) -> dict[str, Any]:
+        """The series of samples ``start``.. (per-sample arrays, ``t_field``), the events from index
+        ``events_from`` on (default: those at or after the first of these samples) and the changes from
+        ``changes_from`` on, without the run's constants: one part of an append-only store
+        (:mod:`twin.runs.series_store`); the parts concatenated after the header give :meth:`arrays`."""
+        n_y, n_x = len(self.header.y), len(self.header.x)
+        out: dict[str, Any] = {}
+        for k, col in self._columns.items():
+            out[k] = col.view()[start:].copy()
+        for k in SAMPLE_SERIES:
+            out.setdefault(k, np.zeros(0))
+        for k in FIELD_SERIES:
+            if k == "field_true" and not self.has_truth:
+                continue
+            out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
+        out["t_field"] = out["t"].copy()
+        if events_from is None:
+            t0 = float(out["t"][0]) if len(out["t"]) else np.inf
+            events = [e for e in self._events if e.t >= t0]
+        else:
+            events = self._events[events_from:]
+        out.update(event_arrays(events))
+        out.update(change_arrays(self._changes[changes_from:]))
+        return out
+
     def metrics(self) -> dict[str, float]:
         """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
         from twin.runs.metrics import compute_metrics
