@@ -42,7 +42,7 @@ export function compareTable(runs, names) {
   const rows = keys().map((k) => {
     const cells = runs.map((r) => {
       const v = r.metrics ? r.metrics[k] : undefined;
-      return `<td class="num">${v === undefined ? "–" : `${kelvin(v, scaleOf(r))} · ${percent(v)}`}</td>`;
+      return `<td class="num">${v === undefined || v === null ? "–" : `${kelvin(v, scaleOf(r))} · ${percent(v)}`}</td>`;
     }).join("");
     return `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>${cells}</tr>`;
   }).join("");
