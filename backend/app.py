@@ -26,10 +26,12 @@ from fastapi.responses import JSONResponse
 from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, docs, files, furnace, health, runs, stream, studies
+from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
+    RequestConflict,
+    RunIsActive,
     RunManager,
     RunNotActive,
     RunNotFound,
@@ -47,6 +49,8 @@ log = logging.getLogger(__name__)
 ERRORS: dict[type[Exception], int] = {
     RunNotFound: status.HTTP_404_NOT_FOUND,
     RunNotActive: status.HTTP_409_CONFLICT,
+    RunIsActive: status.HTTP_409_CONFLICT,
+    RequestConflict: status.HTTP_409_CONFLICT,
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
@@ -121,10 +125,10 @@ def create_app(
         redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, studies, dashboard, docs):
+    for module in (health, furnace, glossary, runs, files, exports, stream, studies, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
-    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
     app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

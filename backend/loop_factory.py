@@ -10,7 +10,7 @@ from typing import Any
 from backend.run_worker import LoopLike
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
-from twin.scenario import Reference, Scenario
+from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -23,6 +23,7 @@ class DefaultLoopFactory:
         self._radiation: dict[str, Any] = {}
         self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
+        self._models: dict[tuple[str, str], tuple[Any, tuple[float, float]]] = {}  # (model, hold range)
 
     def _shared(self, store: dict[str, Any], cfg: FurnaceConfig, load: Any, budget: PlanBudget | None) -> Any:
         """``store[cfg]``, loaded (or ray-traced) once by ``load(cfg)``; a run waiting for another caller's
@@ -76,6 +77,41 @@ class DefaultLoopFactory:
         from twin.control.reference import reference_trajectory
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
+
+    def model(self, cfg: FurnaceConfig, oscillation: OscillationSpec | None) -> tuple[Any, tuple[float, float]]:
+        """The twin's discrete model for ``oscillation`` (time-averaged if enabled, eq. 11) and its hold range
+        (``twin.control.feasibility.hold_range``), cached per furnace and oscillation."""
+        from twin.control.feasibility import hold_range
+        from twin.model.discrete import discrete_model
+
+        osc = oscillation if oscillation is not None and oscillation.enabled else None
+        key = (cfg.digest(), "fixed" if osc is None else osc.model_dump_json())
+        with self._lock:
+            known = self._models.get(key)
+        if known is None:
+            model = discrete_model(cfg, self.radiation(cfg), osc)
+            known = (model, hold_range(model, cfg))
+            with self._lock:
+                self._models[key] = known
+                while len(self._models) > 16:
+                    self._models.pop(next(iter(self._models)))
+        return known
+
+    def feasibility(self, cfg: FurnaceConfig, reference: Reference, duration: float,
+                    oscillation: OscillationSpec | None = None, T_initial: float | None = None,
+                    t_start: float = 0.0) -> Any:
+        """Can the furnace follow ``reference`` (``twin.control.feasibility.check_transition``) over a run of
+        ``duration`` s from ``t_start`` (a live change: from now at the current mean ``T_initial``)?
+        ``None`` if the model cannot be built (the run's own build then reports the problem)."""
+        from twin.control.feasibility import check_transition
+
+        try:
+            model, hold = self.model(cfg, oscillation)
+        except Exception:
+            log.exception("cannot build the model for the feasibility check; the reference is not checked")
+            return None
+        return check_transition(model, cfg, reference, duration=duration, T_initial=T_initial, t_start=t_start,
+                                hold=hold)
 
     def check_plan(self, cfg: FurnaceConfig, scenario: Scenario, budget: PlanBudget) -> None:
         """Raise ``twin.control.budget.PlanTooLarge`` (a ``ValueError``) if the run's first plan is estimated

@@ -32,6 +32,10 @@ class RunCreated(BaseModel):
     id: str
     status: str
     links: RunLinks
+    warnings: list[str] = Field(default_factory=list,
+                                description="what the feasibility check found (the run starts anyway)")
+    replayed: bool = Field(False, description="true when this answers a repeated request id (Idempotency-Key): "
+                                              "the run the first request started")
 
 
 class ChangeOut(BaseModel):
@@ -55,6 +59,7 @@ class ChangeResult(BaseModel):
     applied_t: float | None = None
     replan_s: float | None = Field(None, description="wall time from hand-over to the plan in force (s)")
     message: str | None = None
+    warnings: list[str] = Field(default_factory=list, description="feasibility of a new reference")
 
 
 class RunSummary(BaseModel):
@@ -67,7 +72,14 @@ class RunSummary(BaseModel):
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
     metrics: dict[str, float | None] | None = None
     error: str | None = None
+    label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
     links: RunLinks
+
+
+class LabelIn(BaseModel):
+    """``PATCH /api/runs/{id}``: the run's name (null or empty: none)."""
+
+    label: str | None = Field(None, description="at most 80 characters")
 
 
 class RunDetail(RunSummary):
@@ -76,6 +88,8 @@ class RunDetail(RunSummary):
     oscillation: dict[str, Any] = Field(description="the oscillation in force now, likewise")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
+    windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "
+                                                             "[a, b], steady: [a, b]}, from the last reference change")
 
 
 class StopResult(BaseModel):

@@ -57,7 +57,7 @@ def test_a_check_names_the_field_and_the_bound() -> None:
     with pytest.raises(ValidationError) as exc:
         parse_reference({"setpoint": 1300.5}, low)
     assert _locs(exc) == [("transition", "setpoint")] and "material tables" in str(exc.value)
-    with pytest.raises(ValidationError, match="reachable range 250..1300 K"):
+    with pytest.raises(ValidationError, match="reachable range 300..1300 K"):
         parse_reference({"points": [[1.0, 1400.0]]}, low)
     # a scenario built without a furnace carries the default furnace's amplitude: the check names it
     with pytest.raises(ValidationError) as exc:

@@ -103,12 +103,14 @@ class FakeLoop:
         t_next = round(self.t + self.cfg.sampling.t_s, 9)  # like ClosedLoop: from the next sample on
         self.reference, self.ref_t0, self.T_start = ref, t_next, self.T_ref(self.t)
         self.events.append(f"reference changed at t = {t_next:.1f} s")
+        self.record.note_change(t_next, "reference", ref.model_dump_json())  # like ClosedLoop: the windows move
 
     def set_oscillation(self, spec: Any) -> None:
         time.sleep(self.replan_s)
         self.oscillation = spec
         t_next = round(self.t + self.cfg.sampling.t_s, 9)
         self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {t_next:.1f} s")
+        self.record.note_change(t_next, "oscillation", spec.model_dump_json())
 
     def timeseries(self) -> dict[str, Any]:
         return self.record.arrays()

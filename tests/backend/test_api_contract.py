@@ -253,7 +253,7 @@ def test_bad_points_get_422_that_says_why(tmp_path, small_cfg) -> None:
             ({"points": [[10.0, 2000.0]]}, "2000"),
             ({"points": []}, "at least 1"),
             ({"points": [[1.0, 2.0, 3.0]]}, "at most 2"),
-            ({"points": [[1.0, "hot"]]}, "valid number"),
+            ({"points": [[1.0, "hot"]]}, "must be a number"),
             ({"points": [[10.0, 1280.0]]}, "unreachable"),  # the (fake) furnace holds at most 1250 K
         ]
         for ref, why in bad:
