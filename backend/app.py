@@ -1,7 +1,7 @@
 """The FastAPI app factory: REST API, websocket stream, dashboard page, optional viser view.
 
-One router per resource (``backend/routes``): health, furnace, runs, run files, run stream and
-the dashboard's page and files.  Everything they need comes from typed dependencies
+One router per resource (``backend/routes``): health, furnace, runs, run files, run stream, design
+studies and the dashboard's page and files.  Everything they need comes from typed dependencies
 (``backend/deps.py``); the run manager is the only way to the runs.
 
 >>> import tempfile
@@ -26,10 +26,12 @@ from fastapi.responses import JSONResponse
 from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, docs, files, furnace, health, runs, stream
+from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
+    RequestConflict,
+    RunIsActive,
     RunManager,
     RunNotActive,
     RunNotFound,
@@ -38,6 +40,7 @@ from backend.run_manager import (
 from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
 from backend.security import SecurityMiddleware
 from backend.settings import Settings
+from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
 
@@ -46,11 +49,16 @@ log = logging.getLogger(__name__)
 ERRORS: dict[type[Exception], int] = {
     RunNotFound: status.HTTP_404_NOT_FOUND,
     RunNotActive: status.HTTP_409_CONFLICT,
+    RunIsActive: status.HTTP_409_CONFLICT,
+    RequestConflict: status.HTTP_409_CONFLICT,
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeCancelled: status.HTTP_409_CONFLICT,
     InsufficientStorage: status.HTTP_507_INSUFFICIENT_STORAGE,
+    StudyNotFound: status.HTTP_404_NOT_FOUND,
+    StudyConflict: status.HTTP_409_CONFLICT,
+    StudyRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
 }
 
 
@@ -67,11 +75,13 @@ def create_app(
     viser: bool = False,
     rerun: bool = False,
     furnace_name: str | None = None,
+    study_runner: StudyRunner | None = None,
 ) -> FastAPI:
     """Build the app; the lifespan opens the database, marks crashed runs interrupted, starts the radiation
-    model's warm-up, (with ``viser=True``) the 3D view on ``settings.viser_port`` and (with ``rerun=True``)
-    the rerun web viewer on ``settings.rerun_web_port``.  ``furnace_name`` labels
-    the furnace (``--config``); by default a shipped furnace's name or ``custom``."""
+    models' warm-up, (with ``viser=True``) the 3D view on ``settings.viser_port`` and (with ``rerun=True``)
+    the rerun web viewer on ``settings.rerun_web_port``.  ``furnace_name`` labels the furnace (``--config``);
+    by default a shipped furnace's name or ``custom``.  ``study_runner`` replaces
+    ``twin.studies.engine.run_study`` (tests of the studies API's plumbing)."""
     settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
     cfg = cfg or load_config()
     limits = scenario_limits(cfg, furnace_name)
@@ -88,6 +98,7 @@ def create_app(
         if callable(warm_up):  # the radiation model loads in the background; the server answers meanwhile
             warm_up(cfg)
         app.state.manager = manager
+        app.state.studies = StudyManager(settings, cfg, study_runner, furnace_name=limits.furnace)
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
@@ -119,6 +130,7 @@ def create_app(
             yield
         finally:
             await manager.shutdown()
+            await asyncio.to_thread(app.state.studies.shutdown)
             if scene is not None:
                 scene.stop()
             if viewer is not None:
@@ -135,10 +147,10 @@ def create_app(
         redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, dashboard, docs):
+    for module in (health, furnace, glossary, runs, files, exports, stream, studies, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
-    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
     app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

@@ -143,6 +143,9 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
                     result = ("later", key)
             elif method == "replanning":
                 result = loop.replanning
+            elif method == "add_event":
+                loop.record.add_event(*args)
+                result = None
             elif method == "save_timeseries":
                 save_arrays(args[0], loop.timeseries(), compress=False)
                 result = None
@@ -155,6 +158,20 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
             conn.send(("ok", result))
         except BaseException as exc:
             conn.send(("error", _portable(exc)))
+
+
+class _RecordInChild:
+    """The part of the child's ``RunRecord`` the run worker writes to: the server's own events (the start, the
+    changes' outcomes, saturated groups, the end) go into the series the child appends."""
+
+    def __init__(self, owner: ProcessLoop) -> None:
+        self._owner = owner
+
+    def add_event(self, event: Any) -> None:
+        try:
+            self._owner._call("add_event", event)
+        except LoopProcessError:  # the child is gone: the worker's own list still has the event
+            log.warning("event not recorded, the run's process has ended: %s", getattr(event, "text", event))
 
 
 class ProcessLoop:
@@ -186,6 +203,7 @@ class ProcessLoop:
         self._done = bool(info["done"])
         self._changes: dict[int, Future[float]] = {}  # the child's changes still being planned
         self._replanning = False
+        self.record = _RecordInChild(self)
 
     def _reply(self) -> Any:
         try:

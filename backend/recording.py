@@ -11,8 +11,10 @@ One :class:`rerun.RecordingStream` per run, saved to its file before anything is
 - ``tc/reading/TC1..4`` and ``tc/error/TC1..4`` (reading minus estimate, K);
 - ``power/u/<group>`` and ``power/u_ff/<group>`` (fractions of u_max);
 - ``eta`` (m), ``inhomogeneity/estimated`` and ``inhomogeneity/true`` (K);
-- ``faults/injected`` and ``faults/detected`` (text logs: the faults the simulated furnace started or
-  cleared, and what the twin's fault detection decided), ``events`` (re-plans, changes).
+- ``events``: the run's events (start, live changes, re-plans, saturated groups, feasibility
+  warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time;
+  ``faults/injected`` and ``faults/detected`` the fault events (the faults the simulated furnace started
+  or cleared, and what the twin's fault detection decided).
 
 Scalars are buffered and sent as columns (``send_columns``) at each :meth:`flush`; the
 default blueprint opens the viewer on fields | temperatures and TCs | powers and eta.
@@ -43,6 +45,7 @@ log = logging.getLogger(__name__)
 APP_ID = "furnace-twin"
 TIMELINE = "t"
 TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
+_LEVELS = {"info": rr.TextLogLevel.INFO, "warn": rr.TextLogLevel.WARN, "error": rr.TextLogLevel.ERROR}
 
 
 def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
@@ -66,6 +69,7 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
                 rrb.TimeSeriesView(name="feedforward u_ff (fraction of u_max)", origin="power/u_ff"),
                 rrb.TimeSeriesView(name="inhomogeneity (K)", origin="inhomogeneity"),
                 rrb.TimeSeriesView(name="eta (m)", origin="eta"),
+                rrb.TextLogView(name="events", origin="events"),
             ),
             column_shares=[2, 2, 2],
         ),
@@ -168,8 +172,6 @@ class RecordingSink:
             "tc": np.asarray(s.tc, dtype=float), "tc_hat": np.asarray(s.tc_hat, dtype=float),
             "u": np.asarray(s.u, dtype=float), "u_ff": np.asarray(s.u_ff, dtype=float),
         })
-        for text in s.events or ():
-            self._log_event(float(s.t), str(text))
         if s.t >= self._next_image_t:
             self._next_image_t = float(s.t) + self.image_interval
             self._set_time(float(s.t))
@@ -180,14 +182,18 @@ class RecordingSink:
                     np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
                     depth_range=list(self.temperature_range)))
 
-    def _log_event(self, t: float, text: str) -> None:
-        self._set_time(t)
-        if text.startswith("fault injected") or text.startswith("faults cleared"):
-            self._log("faults/injected", rr.TextLog(text, level=rr.TextLogLevel.WARN))
+    def log_event(self, t: float, text: str, level: str = "info") -> None:
+        """One event of the run as a text log at run time ``t`` (s); ``level`` info, warn or error.  A fault
+        event goes to ``faults/injected`` or ``faults/detected``."""
+        if self._closed:
+            return
+        entity = "events"
+        if text.startswith(("fault injected", "faults cleared")):
+            entity = "faults/injected"
         elif text.startswith("fault detected"):
-            self._log("faults/detected", rr.TextLog(text, level=rr.TextLogLevel.ERROR))
-        else:
-            self._log("events", rr.TextLog(text, level=rr.TextLogLevel.INFO))
+            entity = "faults/detected"
+        self._set_time(float(t))
+        self._log(entity, rr.TextLog(text, level=_LEVELS.get(level, rr.TextLogLevel.INFO)))
 
     def flush(self) -> None:
         """Send the buffered scalars as columns and push them to the file."""

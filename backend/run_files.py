@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +51,13 @@ class RunFiles:
     @property
     def faults(self) -> Path:
         return self.folder / FAULTS
+
+    def remove(self) -> None:
+        """Delete the folder: first out of sight (renamed to ``.deleted-<id>``, atomic), then its files."""
+        trash = self.folder.with_name(f".deleted-{self.folder.name}")
+        if self.folder.is_dir():
+            self.folder.rename(trash)
+        shutil.rmtree(trash, ignore_errors=True)
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:

@@ -8,7 +8,8 @@ from pydantic import BaseModel, Field
 
 
 class RadiationProgress(BaseModel):
-    stage: str = Field(description="waiting, loading the cache, ray tracing, building the model, ready or failed")
+    stage: str = Field(description="waiting, loading the cache, ray tracing, building the model, then loading or "
+                                   "ray tracing the simulated furnace's own table, ready or failed")
     done: int = Field(description="table positions ray-traced so far")
     total: int = Field(description="table positions (0 until known)")
     fraction: float = Field(ge=0.0, le=1.0)
@@ -49,6 +50,10 @@ class RunCreated(BaseModel):
     id: str
     status: str
     links: RunLinks
+    warnings: list[str] = Field(default_factory=list,
+                                description="what the feasibility check found (the run starts anyway)")
+    replayed: bool = Field(False, description="true when this answers a repeated request id (Idempotency-Key): "
+                                              "the run the first request started")
 
 
 class ChangeOut(BaseModel):
@@ -72,6 +77,7 @@ class ChangeResult(BaseModel):
     applied_t: float | None = None
     replan_s: float | None = Field(None, description="wall time from hand-over to the plan in force (s)")
     message: str | None = None
+    warnings: list[str] = Field(default_factory=list, description="feasibility of a new reference")
 
 
 class RunSummary(BaseModel):
@@ -84,7 +90,14 @@ class RunSummary(BaseModel):
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
     metrics: dict[str, float | None] | None = None
     error: str | None = None
+    label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
     links: RunLinks
+
+
+class LabelIn(BaseModel):
+    """``PATCH /api/runs/{id}``: the run's name (null or empty: none)."""
+
+    label: str | None = Field(None, description="at most 80 characters")
 
 
 class RunDetail(RunSummary):
@@ -98,6 +111,8 @@ class RunDetail(RunSummary):
                                                            "[{t (s), text}], oldest first")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
+    windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "
+                                                             "[a, b], steady: [a, b]}, from the last reference change")
 
 
 class StopResult(BaseModel):
@@ -131,3 +146,39 @@ class FurnaceOut(BaseModel):
     limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
                                                "{min, max, exclusive_min, unit, default}")
     defaults: dict[str, Any] = Field(description="the scenario a POST with an empty body starts")
+
+
+class StudyLinks(BaseModel):
+    self: str
+    stop: str
+    resume: str
+    files: str = Field(description="prefix of the study's files: results.parquet, results.csv, study.md, "
+                                   "summary.json, figures/<name>.png")
+
+
+class StudySummary(BaseModel):
+    id: str
+    name: str | None = None
+    furnace: str
+    status: str = Field(description="queued, running, finished, stopped, interrupted or error")
+    created_at: float = Field(description="unix s")
+    started_at: float | None = None
+    ended_at: float | None = None
+    total: int = Field(description="cases of the study")
+    finished: int = Field(description="cases done or failed, including those found done earlier")
+    failed: int
+    skipped: int = Field(description="cases found done by an earlier invocation (resume)")
+    workers: int = Field(description="Dask workers of the current or last invocation")
+    error: str | None = None
+    links: StudyLinks
+
+
+class StudyDetail(StudySummary):
+    study: dict[str, Any] = Field(description="the study document as posted")
+    cases: list[dict[str, Any]] | None = Field(
+        None, description="per case: key, index, params, status, metrics, error (when the study has ended)")
+    best: list[dict[str, Any]] = Field(default_factory=list, description="best case (or grid point) per metric")
+    percentiles: dict[str, dict[str, float]] | None = Field(None, description="Monte Carlo: per metric")
+    timing: dict[str, Any] | None = None
+    figures: list[str] = Field(default_factory=list, description="URLs of the PNG figures")
+    downloads: dict[str, str] = Field(default_factory=dict, description="file name -> URL")

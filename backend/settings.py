@@ -71,6 +71,11 @@ class Settings(BaseSettings):
     rerun_grpc_port: int = Field(9877, ge=1, le=65535, description="the rerun web viewer's gRPC proxy (loopback)")
     rerun_server_memory_limit: str = Field("512MiB", description="what the rerun proxy buffers for late viewers")
     rerun_memory_limit: str = Field("2GiB", description="what the rerun viewer keeps; the oldest data goes first")
+    study_workers: int | None = Field(None, ge=1, le=256,
+                                      description="LocalCluster process workers of a study (default: one per core)")
+    study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "
+                                        "e.g. tcp://127.0.0.1:8786")
+    max_study_cases: int = Field(5000, ge=1, le=100_000, description="largest study accepted (cases)")
 
     @field_validator("api_token")
     @classmethod
@@ -93,3 +98,7 @@ class Settings(BaseSettings):
     @property
     def runs_dir(self) -> Path:
         return self.data_dir / "runs"
+
+    @property
+    def studies_dir(self) -> Path:
+        return self.data_dir / "studies"

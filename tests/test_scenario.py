@@ -20,7 +20,10 @@ def test_defaults_are_the_product_contract():
         "tc_noise": 1.0,
         "seed": 0,
         "faults": [],
+        "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
     }
+    with pytest.raises(ValidationError, match="truth"):
+        Scenario.model_validate({"truth": "model"})
 
 
 def test_reference_forms_are_told_apart():

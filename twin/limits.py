@@ -9,7 +9,8 @@ plant mismatch); the others come from the loaded furnace:
 - period default 0.15 t_E (section 5.2: Pi = 0.15 t_E) with the paper's t_E = 120 s;
 - setpoint above the specimen's initial temperature and at most the top of the material
   tables (beyond it c_p and lambda would be extrapolated), default the paper's 1100 K;
-- reference points at most that top as well;
+- reference point temperatures in that same range (one set of limits for every reference; a point
+  may equal the initial temperature, a setpoint must lie above it);
 - TC4 position and TC noise default to the furnace's ``[sensors]``;
 - injected faults name a TC (TC1..TC4) or one of the furnace's lamp groups.
 
@@ -31,7 +32,7 @@ import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from twin.config import DEFAULT_CONFIG_PATH, SHIPPED_FURNACES, FurnaceConfig, load_config
 
@@ -42,7 +43,6 @@ PAPER_PERIOD_PER_T_E = 0.15  # Pi = 0.15 t_E
 PAPER_AMPLITUDE_PITCHES = 3.0  # eta amplitude 3 L_h
 
 MAX_DURATION_S = 3600.0  # longest run and latest reference point the twin accepts
-POINT_T_FLOOR_K = 250.0  # sanity floor of reference points; the reachable range is checked when a run is built
 #: most reference points a scenario or a live change may hold: a C1 curve over at most MAX_DURATION_S needs
 #: no more (one point every 3.6 s), and it bounds the body, the stored scenario and every list of runs
 MAX_REFERENCE_POINTS = 1000
@@ -103,6 +103,11 @@ TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
 TC_FAULT_KINDS = ("stuck", "drift", "offset", "dropout")
 GROUP_FAULT_KINDS = ("failed", "derate")
 
+#: the simulated furnace's truth (twin.scenario.Scenario.truth): its own, or the model's tables and ideal sensors
+TruthKind = Literal["independent", "shared"]
+TRUTH_CHOICES: tuple[TruthKind, ...] = ("independent", "shared")
+TRUTH_DEFAULT: TruthKind = "independent"
+
 
 @dataclass(frozen=True)
 class ScenarioLimits:
@@ -157,6 +162,7 @@ class ScenarioLimits:
                        "kinds": {"tc": list(TC_FAULT_KINDS), "group": list(GROUP_FAULT_KINDS)},
                        "drift": FAULT_DRIFT.to_json(), "offset": FAULT_OFFSET.to_json(),
                        "derate": FAULT_DERATE.to_json(), "max_entries": MAX_FAULTS},
+            "truth": {"choices": list(TRUTH_CHOICES), "default": TRUTH_DEFAULT},
         }
 
 
@@ -170,7 +176,7 @@ def scenario_limits(cfg: FurnaceConfig, name: str | None = None) -> ScenarioLimi
     return ScenarioLimits(
         furnace=name,
         setpoint=Range(T_0, T_top, min(PAPER_SETPOINT_K, T_top), "K", lo_open=True, why=top),
-        point_temperature=Range(POINT_T_FLOOR_K, T_top, None, "K", why=top),
+        point_temperature=Range(T_0, T_top, None, "K", why=top),  # a first point may be the initial temperature
         amplitude=Range(0.0, eta_max, min(PAPER_AMPLITUDE_PITCHES * cfg.lamps.horizontal.pitch, eta_max), "m",
                         why=f"eta_max of furnace '{name}'"),
         tc4=cfg.sensors.tc4,

@@ -232,6 +232,11 @@ class Scenario(_Model):
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
     faults: list[FaultSpec] = Field(default_factory=list, max_length=lim.MAX_FAULTS,
                                     description="faults injected into the simulated furnace at run time")
+    truth: lim.TruthKind = Field(
+        lim.TRUTH_DEFAULT,
+        description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
+        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -299,3 +304,26 @@ def check(value: Scenario | OscillationSpec | TransitionReference | PointsRefere
         parse_oscillation(data, limits)
     else:
         parse_reference(data, limits)
+
+
+def describe(value: TransitionReference | PointsReference | OscillationSpec | list[FaultSpec]) -> str:
+    """A reference, an oscillation or a list of faults in a few plain words (the run's events, the dashboard).
+
+    >>> describe(TransitionReference(setpoint=1050.0, t_E=30.0)), describe(OscillationSpec())
+    ('1050 K in 30 s', 'off')
+    >>> describe(PointsReference(points=[(20.0, 1000.0), (60.0, 1050.0)]))
+    'points 20 s → 1000 K, 60 s → 1050 K'
+    >>> describe([]), describe(parse_faults([{"at": 5.0, "target": "TC2", "kind": "offset", "value": 20.0}]))
+    ('no faults', 'TC2 offset 20 K at +5 s')
+    """
+    if isinstance(value, list):
+        return ", ".join(f"{f.describe()} at +{f.at:g} s" for f in value) or "no faults"
+    if isinstance(value, OscillationSpec):
+        if not value.enabled:
+            return "off"
+        return f"on ({1000 * value.amplitude:.0f} mm, {value.period:g} s)"
+    if isinstance(value, PointsReference):
+        pts = [f"{t:g} s → {T:g} K" for t, T in value.points]
+        more = f", … ({len(pts)} points)" if len(pts) > 4 else ""
+        return "points " + ", ".join(pts[:4]) + more
+    return f"{value.setpoint:g} K in {value.t_E:g} s"

@@ -19,7 +19,7 @@ from backend.app import create_app
 from backend.loop_factory import WarmUpStatus
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer, free_port
-from conftest import FakeFactory
+from conftest import FakeFactory, FakeStudyRunner
 
 WARM_UP_S = 3.0
 REPLAN_S = 8.0
@@ -51,7 +51,8 @@ def test_openapi_no_server_errors_no_timeouts(tmp_path, small_cfg) -> None:
     assert s.change_timeout_s < 10.0  # the server's own wait stays under the client's timeout
     seen: list[tuple[str, int]] = []
     slowest: list[tuple[float, str]] = []
-    with ThreadedServer(create_app(s, small_cfg, loop_factory=WarmingFakeFactory()), free_port()) as srv:
+    app = create_app(s, small_cfg, loop_factory=WarmingFakeFactory(), study_runner=FakeStudyRunner())
+    with ThreadedServer(app, free_port()) as srv:
         schema = schemathesis.openapi.from_url(f"{srv.url}/openapi.json")
         labels = []
         for result in schema.get_all_operations():
@@ -73,7 +74,8 @@ def test_openapi_no_server_errors_no_timeouts(tmp_path, small_cfg) -> None:
                   "POST /api/runs/{run_id}/stop", "PUT /api/runs/{run_id}/reference",
                   "PUT /api/runs/{run_id}/oscillation", "PUT /api/runs/{run_id}/faults",
                   "GET /api/runs/{run_id}/metrics", "GET /api/runs/{run_id}/recording",
-                  "GET /api/runs/{run_id}/timeseries"):
+                  "GET /api/runs/{run_id}/timeseries", "POST /api/studies", "GET /api/studies",
+                  "GET /api/studies/{study_id}"):
         assert label in labels, label
         assert any(lbl == label for lbl, _ in seen), label
     assert max(slowest)[0] < 10.0, max(slowest)

@@ -27,7 +27,7 @@ def gated_radiation(monkeypatch, small_radiation):
     """radiation_model() that reports 3 of 13 positions traced, then waits for ``gate.set()``."""
     gate = threading.Event()
 
-    def slow_model(cfg, *, cache_dir=None, progress=False, on_position=None):
+    def slow_model(cfg, *, cache_dir=None, progress=False, symmetric=False, on_position=None):
         if on_position is not None:
             for k in (1, 2, 3):
                 on_position(k, 13)

@@ -7,9 +7,14 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   ``u``, ``u_ff`` (n, 6) fractions of u_max;
 * fields at ``t_field``: ``field_hat`` (m, N_y, N_x) K, and ``field_true`` only when the furnace is a
   simulation (a real furnace has no true field).  Every sample up to ``full_rate_until`` (the loop: 2 t_E,
-  the end of the metrics' windows), then every ``field_every``-th (the loop: one per second, the least
-  product.md allows), so a long run's memory grows by the scalars and about 3.5 kB per second;
-* events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
+  the end of the metrics' windows, moved by a live reference change), then every ``field_every``-th (the
+  loop: one per second, the least product.md allows), so a long run's memory grows by the scalars and
+  about 3.5 kB per second;
+* events: ``event_t`` (s), ``event_text`` and ``event_level`` (``info``, ``warn`` or ``error``), the
+  run's own reports (re-plans, switches; the server adds its own: start, end, changes, saturation);
+* live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
+  (``reference`` or ``oscillation``) and ``change_json`` (the new reference / oscillation as JSON); the
+  metrics' windows start at the last reference change (:func:`twin.runs.metrics.windows_of`);
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
 
@@ -26,14 +31,18 @@ Example
 ...                     field_true=None, tc=np.zeros(4), tc_hat=np.zeros(4), u=np.zeros(1), u_ff=np.zeros(1),
 ...                     inhomogeneity=1.0, true_mean=None, true_inhomogeneity=None, events=("started",)))
 >>> a = rec.arrays()
+>>> rec.note_change(0.1, "reference", '{"setpoint": 900.0, "t_E": 5.0}')
 >>> len(rec), a["T_mean_hat"].tolist(), "field_true" in a, a["event_text"].tolist()
 (1, [301.0], False, ['started'])
+>>> rec.arrays()["change_kind"].tolist(), load_changes(rec.arrays())[0].body["setpoint"]
+(['reference'], 900.0)
 """
 
 from __future__ import annotations
 
+import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -46,6 +55,72 @@ Array = NDArray[np.float64]
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 FIELD_SERIES = ("field_hat", "field_true")
+EVENT_LEVELS = ("info", "warn", "error")
+
+
+@dataclass(frozen=True)
+class RunEvent:
+    """One report of a run: at run time ``t`` (s), a plain sentence, ``info``, ``warn`` or ``error``."""
+
+    t: float
+    text: str
+    level: str = "info"
+
+
+def loop_event_level(text: str) -> str:
+    """The level of an event the closed loop reports (its record and the server's list agree): a fault the
+    twin detected, or anything that failed, is a warning; an injected fault and the rest are information.
+
+    >>> loop_event_level("fault detected: TC2 dropout at 4.1 s"), loop_event_level("fault injected: T2h failed")
+    ('warn', 'info')
+    """
+    if text.startswith(("fault injected", "faults cleared")):
+        return "info"
+    return "warn" if text.startswith("fault detected") or "failed" in text else "info"
+
+
+@dataclass(frozen=True)
+class RunChange:
+    """A live change applied during a run: from run time ``t`` (s) on, ``kind`` (``reference`` or
+    ``oscillation``) is ``body`` (the reference / oscillation as a JSON object)."""
+
+    t: float
+    kind: str
+    body: dict[str, Any]
+
+
+def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:
+    """Events as the ``event_t``, ``event_text``, ``event_level`` arrays of the ``timeseries.npz`` layout."""
+    ev = list(events)
+    return {"event_t": np.asarray([e.t for e in ev], float),
+            "event_text": np.asarray([e.text for e in ev], dtype=str),
+            "event_level": np.asarray([e.level for e in ev], dtype=str)}
+
+
+def load_events(arrays: Mapping[str, Any]) -> list[RunEvent]:
+    """The events of a saved run (an older file without ``event_*`` has none; without levels: ``info``)."""
+    if "event_t" not in arrays:
+        return []
+    ts, texts = np.asarray(arrays["event_t"], float), np.asarray(arrays["event_text"]).astype(str)
+    levels = np.asarray(arrays["event_level"]).astype(str) if "event_level" in arrays else ["info"] * len(ts)
+    return [RunEvent(float(t), str(x), str(lv)) for t, x, lv in zip(ts, texts, levels, strict=True)]
+
+
+def change_arrays(changes: Iterable[RunChange]) -> dict[str, Any]:
+    """Live changes as the ``change_t``, ``change_kind``, ``change_json`` arrays of ``timeseries.npz``."""
+    ch = list(changes)
+    return {"change_t": np.asarray([c.t for c in ch], float),
+            "change_kind": np.asarray([c.kind for c in ch], dtype=str),
+            "change_json": np.asarray([json.dumps(c.body, sort_keys=True) for c in ch], dtype=str)}
+
+
+def load_changes(arrays: Mapping[str, Any]) -> list[RunChange]:
+    """The live changes of a saved run, oldest first (none in an older file)."""
+    if "change_t" not in arrays:
+        return []
+    return [RunChange(float(t), str(k), json.loads(str(b))) for t, k, b in
+            zip(np.asarray(arrays["change_t"], float), np.asarray(arrays["change_kind"]).astype(str),
+                np.asarray(arrays["change_json"]).astype(str), strict=True)]
 
 
 @dataclass(frozen=True)
@@ -147,7 +222,8 @@ class RunRecord:
         self._columns: dict[str, _Column] = {}
         self._fields: dict[str, _Column] = {}  # t_field and the field series
         self._since_field = 0
-        self._events: list[tuple[float, str]] = []
+        self._events: list[RunEvent] = []
+        self._changes: list[RunChange] = []
 
     def __len__(self) -> int:
         return self._columns["t"].n if self._columns else 0
@@ -173,7 +249,18 @@ class RunRecord:
                     self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
             for k, v in fields_now.items():
                 self._fields[k].append(v)
-        self._events.extend((float(snap.t), str(e)) for e in snap.events)
+        self._events.extend(RunEvent(float(snap.t), str(e), loop_event_level(str(e))) for e in snap.events)
+
+    def note_change(self, t: float, kind: str, body_json: str) -> None:
+        """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``;
+        a reference change moves the metrics' windows, and the fields are kept at every sample through them."""
+        change = RunChange(float(t), kind, json.loads(body_json))
+        self._changes.append(change)
+        if kind == "reference" and np.isfinite(self.full_rate_until):
+            from twin.runs.metrics import windows_from
+
+            w = windows_from(self.header.t_E, self.header.setpoint, [(change.t, change.kind, change.body)])
+            self.full_rate_until = max(self.full_rate_until, w.steady[1])
 
     def arrays(self) -> dict[str, Any]:
         """Everything recorded so far, in the ``timeseries.npz`` layout (copies)."""
@@ -190,14 +277,27 @@ class RunRecord:
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
         t_field = self._fields.get("t_field")
         out["t_field"] = t_field.view().copy() if t_field is not None else np.zeros(0)
-        out["event_t"] = np.asarray([t for t, _ in self._events], float)
-        out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
+        out.update(event_arrays(self._events))
+        out.update(change_arrays(self._changes))
         return out
 
-    def tail(self, start: int) -> dict[str, Any]:
-        """The series of samples ``start``.. (per-sample arrays, ``t_field``, and the events of those samples)
-        without the run's constants: one part of an append-only store (:mod:`twin.runs.series_store`);
-        the parts concatenated after the header give :meth:`arrays`."""
+    def add_event(self, event: RunEvent) -> None:
+        """An event that is not a sample's (the server's: the start, refused changes, saturated groups, the end)."""
+        self._events.append(event)
+
+    @property
+    def n_events(self) -> int:
+        return len(self._events)
+
+    @property
+    def n_changes(self) -> int:
+        return len(self._changes)
+
+    def tail(self, start: int, events_from: int | None = None, changes_from: int = 0) -> dict[str, Any]:
+        """The series of samples ``start``.. (per-sample arrays, ``t_field``), the events from index
+        ``events_from`` on (default: those at or after the first of these samples) and the changes from
+        ``changes_from`` on, without the run's constants: one part of an append-only store
+        (:mod:`twin.runs.series_store`); the parts concatenated after the header give :meth:`arrays`."""
         n_y, n_x = len(self.header.y), len(self.header.x)
         out: dict[str, Any] = {}
         for k, col in self._columns.items():
@@ -215,9 +315,12 @@ class RunRecord:
             if k == "field_true" and not self.has_truth:
                 continue
             out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
-        events = [(t, e) for t, e in self._events if t >= t0]
-        out["event_t"] = np.asarray([t for t, _ in events], float)
-        out["event_text"] = np.asarray([e for _, e in events], dtype=str)
+        if events_from is None:
+            events = [e for e in self._events if e.t >= t0]
+        else:
+            events = self._events[events_from:]
+        out.update(event_arrays(events))
+        out.update(change_arrays(self._changes[changes_from:]))
         return out
 
     def metrics(self) -> dict[str, float]:
