@@ -22,6 +22,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import threading
 from concurrent.futures import Future
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -182,6 +183,7 @@ class ProcessLoop:
         budget = budget or PlanBudget()
         ctx = _context()
         here, there = ctx.Pipe()
+        self._call_lock = threading.RLock()
         self._proc = ctx.Process(target=_serve, args=(there, cfg.model_dump_json(), scenario.model_dump_json(),
                                                       niceness, (budget.max_wall_s, budget.max_memory_mb)),
                                  name="furnace-run", daemon=True)
@@ -215,10 +217,12 @@ class ProcessLoop:
         return value
 
     def _call(self, method: str, *args: Any) -> Any:
-        if self._closed:
-            raise LoopProcessError("the run's process is closed")
-        self._conn.send((method, args))
-        return self._reply()
+        """One round trip; one at a time (the run's thread steps, a route's thread may read the series)."""
+        with self._call_lock:
+            if self._closed:
+                raise LoopProcessError("the run's process is closed")
+            self._conn.send((method, args))
+            return self._reply()
 
     # ---- LoopLike ----
     @property
@@ -283,14 +287,15 @@ class ProcessLoop:
         return got
 
     def close(self) -> None:
-        if self._closed:
-            return
-        try:
-            self._call("close")
-        except Exception:
-            log.warning("the run's process did not close cleanly", exc_info=True)
-        self._closed = True
-        self._conn.close()
+        with self._call_lock:  # no other round trip starts on the closed pipe
+            if self._closed:
+                return
+            try:
+                self._call("close")
+            except Exception:
+                log.warning("the run's process did not close cleanly", exc_info=True)
+            self._closed = True
+            self._conn.close()
         self._proc.join(timeout=10)
         if self._proc.is_alive():
             self._kill()

@@ -370,8 +370,13 @@ class RunWorker:
 
     def live_series(self) -> dict[str, Any] | None:
         """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush, with the events
-        numbered as the frames number them (this worker's list); any thread."""
-        data = self._timeseries()
+        numbered as the frames number them (this worker's list); any thread.  ``None`` once the loop has
+        closed (a loop in its own process: the run's files have the series then)."""
+        try:
+            data = self._timeseries()
+        except RuntimeError as exc:  # backend.process_loop.LoopProcessError: the run ended meanwhile
+            log.info("run %s: live series unavailable (%s); read from its files", self.run_id, exc)
+            return None
         if data is not None:
             data.update(event_arrays(list(self.events)))
         return data
