@@ -12,10 +12,11 @@ import pytest
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer, free_port
+from conftest import wait_model_ready
 
 pytestmark = pytest.mark.browser
 
-LIVE_RUN = {"duration": 600.0, "speed": 2.0, "reference": {"setpoint": 800.0, "t_E": 6.0}}
+LIVE_RUN = {"duration": 600.0, "speed": 2.0, "reference": {"setpoint": 900.0, "t_E": 8.0}}  # as test_browser.py
 
 
 def _wait_text(page, selector: str, needle: str, timeout: float = 90_000) -> None:
@@ -29,7 +30,11 @@ def _wait_text(page, selector: str, needle: str, timeout: float = 90_000) -> Non
 def test_inject_and_clear_a_fault_from_the_dashboard(tmp_path, small_cfg, browser, artifacts) -> None:
     s = Settings(data_dir=tmp_path, viser_port=0)
     with ThreadedServer(create_app(s, small_cfg), free_port()) as srv:
-        run_id = httpx.post(f"{srv.url}/api/runs", json=LIVE_RUN, timeout=60).json()["id"]
+        with httpx.Client(base_url=srv.url, timeout=60) as c:
+            wait_model_ready(c)  # so the POST's own checks run now, not once the run waits as queued
+            r = c.post("/api/runs", json=LIVE_RUN)
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
         page = browser.new_page(viewport={"width": 1280, "height": 900})
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))

@@ -13,7 +13,7 @@ import pytest
 from backend.process_loop import ProcessLoop
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.runs.series_store import consolidate
-from twin.scenario import Scenario, parse_faults, parse_reference
+from twin.scenario import PointsReference, Scenario, parse_faults, parse_reference
 
 SCENARIO = {"duration": 60.0, "reference": {"setpoint": 700.0, "t_E": 3.0}}
 
@@ -23,8 +23,11 @@ def test_a_loop_in_its_own_process(tmp_path, small_cfg) -> None:
     try:
         first = loop.step()
         assert first.t == 0.0 and first.field_hat.shape == (small_cfg.specimen.ny, small_cfg.specimen.nx)
-        with pytest.raises(ValueError, match="unreachable"):  # the child's ReferenceError, as a ValueError
-            loop.set_reference(parse_reference({"points": [[1.0, 900.0], [2.0, 260.0]]}))
+        # 260 K is below what the scenario limits allow (300 K); built without them, the child's loop refuses
+        # it: its ReferenceError arrives as a ValueError
+        cold = PointsReference.model_construct(points=[(1.0, 900.0), (2.0, 260.0)])
+        with pytest.raises(ValueError, match="unreachable"):
+            loop.set_reference(cold)
         fut = loop.set_reference(parse_reference({"setpoint": 750.0, "t_E": 2.0}))
         loop.set_faults(parse_faults([{"target": "TC2", "kind": "dropout"}]))
         snaps = []

@@ -25,7 +25,7 @@ from conftest import wait_status
 
 ENTITIES = ("/field/estimated", "/field/true", "/temperature/T_mean_hat", "/tc/reading/TC1", "/tc/error/TC4",
             "/power/u/T1h", "/power/u_ff/T2v", "/eta", "/faults/injected", "/faults/detected")
-SCENARIO = {"duration": 4.0, "reference": {"setpoint": 700.0, "t_E": 3.0},
+SCENARIO = {"duration": 4.0, "reference": {"setpoint": 700.0, "t_E": 20.0},  # a reference it can follow
             "faults": [{"at": 1.0, "target": "TC2", "kind": "dropout"}]}
 
 
@@ -90,7 +90,7 @@ def test_an_unreachable_rerun_endpoint_leaves_the_run_alone(tmp_path, small_cfg)
     app = create_app(Settings(data_dir=tmp_path, rerun_connect=url), small_cfg)
     with TestClient(app, base_url="http://127.0.0.1") as c:
         t0 = time.monotonic()
-        r = c.post("/api/runs", json={"duration": 2.0, "reference": {"setpoint": 700.0, "t_E": 3.0}})
+        r = c.post("/api/runs", json={"duration": 2.0, "reference": {"setpoint": 700.0, "t_E": 20.0}})
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
         body = wait_status(c, run_id, {"finished", "error"})

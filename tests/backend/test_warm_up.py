@@ -57,27 +57,33 @@ def test_a_post_during_warm_up_is_queued_and_starts_when_ready(tmp_path, small_c
         assert (h["radiation_progress"]["done"], h["radiation_progress"]["total"]) == (3, 13)
 
         t0 = time.monotonic()
-        r = c.post("/api/runs", json={"duration": 1.0, "reference": {"setpoint": 700.0, "t_E": 2.0}})
+        r = c.post("/api/runs", json={"duration": 1.0, "reference": {"setpoint": 700.0, "t_E": 20.0}})
         elapsed = time.monotonic() - t0
         assert r.status_code == 201, r.text
         assert r.json()["status"] == "queued"
         assert elapsed < 1.0, f"POST took {elapsed:.2f} s during the warm-up"
         run_id = r.json()["id"]
+        # the form's check says it cannot tell yet, instead of waiting for the model (and a client's timeout)
+        t0 = time.monotonic()
+        pending = c.post("/api/feasibility", json={"reference": {"setpoint": 700.0, "t_E": 20.0}})
+        assert time.monotonic() - t0 < 1.0 and pending.json()["verdict"] == "pending", pending.text
+        assert "loading" in pending.json()["messages"][0]
         time.sleep(0.3)
         assert c.get(f"/api/runs/{run_id}").json()["status"] == "queued"  # nothing can run yet
 
-        # 260 K is colder than every surface around the specimen (test_lifecycle_real.py)
-        cold = {"duration": 1.0, "reference": {"points": [[5.0, 900.0], [10.0, 260.0]]}}
+        # with the lamps off the warm holders and walls keep the specimen above 350 K: the last point cannot be
+        # held (test_lifecycle_real.py), which only the model can tell
+        cold = {"duration": 240.0, "reference": {"points": [[60.0, 900.0], [120.0, 350.0]]}}
         unreachable = c.post("/api/runs", json=cold)
         assert unreachable.status_code == 201  # not checkable before the model is ready
         gated_radiation.set()
         assert wait_status(c, run_id, {"finished", "error"})["status"] == "finished"
         assert _health(c)["radiation"] == "ready"
         bad = wait_status(c, unreachable.json()["id"], {"finished", "error"})
-        assert bad["status"] == "error" and "reference" in bad["error"], bad
+        assert bad["status"] == "error" and "lamps off" in bad["error"], bad
         # once ready, the same reference is refused at once
         again = c.post("/api/runs", json=cold)
-        assert again.status_code == 422 and "unreachable" in again.text
+        assert again.status_code == 422 and "lamps off" in again.text, again.text
 
 
 def test_a_run_stopped_while_queued_ends_stopped(tmp_path, small_cfg, gated_radiation) -> None:

@@ -1,9 +1,11 @@
 """What the loop does about the faults its detector finds (``twin.runs.loop.ClosedLoop``; docs/faults.md).
 
 - :func:`innovation_tests_wanted`: the detector's innovation tests run while the estimator's model can
-  explain its innovations: always with the specimen fixed; with the averaged model (eq. 11) of an
-  oscillating specimen only once the reference has held still for :data:`SETTLED_S` (while it heats, that
-  model's innovations are coloured enough to pass for faults);
+  explain its innovations: once the reference has held still for :data:`SETTLED_S`.  While the furnace
+  heats the model's errors are largest (against the simulated furnace's own truth, issue 10: 7-11 % of the
+  setpoint open loop in the transient, 4-5 % in the steady state) and its innovations pass for faults: a
+  fault-free heat-up of the small furnace had T2v declared failed at 25 s; with the averaged model (eq. 11)
+  of an oscillating specimen every heat-up raised false decisions even against the model's own plant;
 - :func:`faulty_model`: the controller's model with each lamp group scaled by the fraction of its power it
   is believed to deliver (a failed group's column of B is 0: the OCP holds it at 0, the LQG leaves it);
 - :func:`reach_note`: what the groups left can hold (fillet mean at full power, the model's steady state)
@@ -13,7 +15,7 @@
 
 Example
 -------
->>> innovation_tests_wanted(oscillating=True, t=130.0, t_end=120.0), innovation_tests_wanted(False, 0.0, 120.0)
+>>> innovation_tests_wanted(t=130.0, t_end=120.0), innovation_tests_wanted(t=140.0, t_end=120.0)
 (False, True)
 """
 
@@ -31,26 +33,26 @@ from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import FaultInjectable, Furnace
-from twin.scenario import FaultSpec, OscillationSpec
+from twin.scenario import FaultSpec
 
 log = logging.getLogger(__name__)
 
-#: with the averaged model of an oscillating specimen the innovation tests wait this long (s) after the
-#: reference's transition (docs/faults.md: false decisions at 52-64 s of every oscillating heat-up)
+#: the innovation tests wait this long (s) after the reference's transition (docs/faults.md: false
+#: decisions during heat-ups, at 52-64 s of every oscillating one and at 25 s of a fixed one against the truth)
 SETTLED_S = 20.0
 
 
-def innovation_tests_wanted(oscillating: bool, t: float, t_end: float) -> bool:
-    """See the module docstring."""
-    return not oscillating or t >= t_end + SETTLED_S
+def innovation_tests_wanted(t: float, t_end: float) -> bool:
+    """See the module docstring: at run time ``t`` with a reference whose transition ends at ``t_end``."""
+    return t >= t_end + SETTLED_S
 
 
-def detection_mode_event(on: bool, oscillating: bool) -> str:
+def detection_mode_event(on: bool) -> str:
     """The event that says when the innovation tests switch."""
     if on:
-        return "fault detection: innovation tests on" + (" (reference held still)" if oscillating else "")
-    return ("fault detection: while the specimen oscillates and the reference moves, the averaged model cannot "
-            "explain the TCs sample by sample: only TCs that drop out or stick are detected")
+        return "fault detection: innovation tests on (reference held still)"
+    return ("fault detection: while the reference moves the model cannot explain the TCs sample by sample: "
+            "only TCs that drop out or stick are detected")
 
 
 def faulty_model(nominal: Any, lamp_gains: ArrayLike) -> Any:
@@ -85,7 +87,6 @@ class FaultRideThrough:
     t_s: float
     _lock: threading.Lock
     _events: list[str]
-    _oscillation: OscillationSpec
     _ref_fn: Callable[[Any], Any]
     _lamp_gains: Any
     _lamps_change: str
@@ -94,10 +95,9 @@ class FaultRideThrough:
     def _motion_for_detection(self, t: float) -> None:
         """The detector's innovation tests while the estimator's model explains its innovations
         (:func:`innovation_tests_wanted`)."""
-        osc = self._oscillation.enabled
-        on = innovation_tests_wanted(osc, t, float(getattr(self._ref_fn, "t_end", 0.0)))
+        on = innovation_tests_wanted(t, float(getattr(self._ref_fn, "t_end", 0.0)))
         if on != self.detector.innovation_tests:
-            self._events.append(detection_mode_event(on, osc))
+            self._events.append(detection_mode_event(on))
         self.detector.set_innovation_tests(on)
 
     def _on_detections(self, t: float, detections: Sequence[Any]) -> None:

@@ -52,10 +52,12 @@ CASES: tuple[tuple[str, dict[str, Any]], ...] = (
 DETECTED = "fault detected: "
 
 
-def _run(cfg: FurnaceConfig, radiation: Any, scenario: Scenario) -> dict[str, Any]:
+def _run(cfg: FurnaceConfig, radiation: Any, scenario: Scenario, truth_radiation: Any = None) -> dict[str, Any]:
+    from twin.furnace.simulated import SimulatedFurnace
     from twin.runs.loop import ClosedLoop
 
-    loop = ClosedLoop(cfg, scenario, radiation)
+    furnace = SimulatedFurnace.for_scenario(cfg, scenario, radiation, truth_radiation=truth_radiation)
+    loop = ClosedLoop(cfg, scenario, radiation, furnace=furnace)
     try:
         for _ in loop.run():
             pass
@@ -76,21 +78,28 @@ def _tc4_max(ts: dict[str, Any], t_from: float) -> float:
 def study(cfg: FurnaceConfig, *, seeds: int = 3, at: float = 150.0, oscillation: bool = False,
           cases: tuple[tuple[str, dict[str, Any]], ...] = CASES, base: dict[str, Any] | None = None
           ) -> dict[str, Any]:
-    """The table of the module docstring, as JSON-ready data."""
+    """The table of the module docstring, as JSON-ready data (against the scenario's truth: the simulated
+    furnace's own by default, ``base={"truth": "shared"}`` for the model's plant)."""
     from twin.radiation import radiation_model
 
     radiation = radiation_model(cfg)
     base = {**(base or {}), "oscillation": {"enabled": oscillation}}
+    own = None
+    if Scenario.model_validate(base).truth == "independent":
+        from twin.furnace.simulated.truth import truth_radiation
+
+        own = truth_radiation(cfg)
     setpoint = Scenario.model_validate(base).reference.setpoint
     rows: list[dict[str, Any]] = []
     clean: dict[int, dict[str, Any]] = {}
     for seed in range(seeds):
-        clean[seed] = _run(cfg, radiation, Scenario.model_validate({**base, "seed": seed}))
+        clean[seed] = _run(cfg, radiation, Scenario.model_validate({**base, "seed": seed}), own)
     for name, fault in cases:
         for seed in range(seeds):
             t0 = time.perf_counter()
             ok = clean[seed]
-            res = _run(cfg, radiation, Scenario.model_validate({**base, "seed": seed, "faults": [{**fault, "at": at}]}))
+            res = _run(cfg, radiation, Scenario.model_validate({**base, "seed": seed, "faults": [{**fault, "at": at}]}),
+                       own)
             mine = [d for d in res["detections"] if d[1] == fault["target"] and d[0] >= at]
             false = [d for d in res["detections"] if d not in mine and d[2] != "readmitted"]
             m, mo = res["metrics"], ok["metrics"]
@@ -112,7 +121,8 @@ def study(cfg: FurnaceConfig, *, seeds: int = 3, at: float = 150.0, oscillation:
             rows.append(row)
             log.info("%s seed %d: %s (%.0f s)", name, seed, {k: row[k] for k in ("detected_after_s", "kind",
                      "false", "tc4_after", "tc4_after_ok")}, time.perf_counter() - t0)
-    return {"oscillation": oscillation, "at": at, "seeds": seeds, "rows": rows}
+    return {"oscillation": oscillation, "at": at, "seeds": seeds, "truth": Scenario.model_validate(base).truth,
+            "rows": rows}
 
 
 def _k(metrics: dict[str, Any], key: str, setpoint: float) -> float | None:
@@ -127,13 +137,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--oscillate", action="store_true")
     p.add_argument("--case", action="append", help="only these cases (names of CASES)")
     p.add_argument("--config", default=None)
+    p.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace's own truth (default) or the model's plant")
     p.add_argument("--json", default=None, help="write the table here")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
     for noisy in ("twin.estimation", "twin.control", "twin.runs.loop"):
         logging.getLogger(noisy).setLevel(logging.ERROR)
     cases = tuple(c for c in CASES if not args.case or c[0] in args.case)
-    out = study(load_config(args.config), seeds=args.seeds, at=args.at, oscillation=args.oscillate, cases=cases)
+    out = study(load_config(args.config), seeds=args.seeds, at=args.at, oscillation=args.oscillate, cases=cases,
+                base={"truth": args.truth})
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
