@@ -1,4 +1,4 @@
-"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench.
+"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, emulate.
 
 Each sub-command lives in its own module and is imported only when used, so
 ``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
@@ -67,6 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+
+    s = sub.add_parser("emulate", help="the simulated furnace served in real time over OPC UA (hardware in the loop)")
+    from twin.furnace.emulator.command import add_arguments as emulate_arguments
+
+    emulate_arguments(s)
     return p
 
 
@@ -90,6 +95,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    if not args.verbose:  # asyncua reports every node it creates and every session at INFO
+        logging.getLogger("asyncua").setLevel(logging.WARNING)
     from twin.config import ConfigError, load_config
 
     try:
@@ -118,6 +125,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.runs.bench import bench_command
 
             return bench_command(cfg, args)
+        if args.command == "emulate":
+            from twin.furnace.emulator.command import emulate_command
+
+            return emulate_command(cfg, args)
     except ConfigError as exc:
         print(f"furnace-twin: {exc}", file=sys.stderr)  # noqa: T201
         return 2

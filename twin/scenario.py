@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
 MAX_DURATION_S = 3600.0
 MAX_SPEED = 1000.0
@@ -92,6 +92,33 @@ class Mismatch(_Model):
     lamp_efficiency: float = Field(0.0, ge=-0.5, le=0.5)
 
 
+class SimulatedPlant(_Model):
+    """The run's furnace is simulated in process (``SimulatedFurnace``): any speed."""
+
+    kind: Literal["simulated"] = "simulated"
+
+
+class OpcUaPlant(_Model):
+    """A furnace over OPC UA (a real one, or ``furnace-twin emulate``): real time only.
+
+    Which endpoints a server may connect to, and with which security, is the server's setting
+    (``FURNACE_TWIN_OPCUA_*``), never the scenario's.
+    """
+
+    kind: Literal["opcua"]
+    endpoint: str = Field("opc.tcp://127.0.0.1:4840/furnace-twin/", description="opc.tcp://host:port/path")
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, v: str) -> str:
+        from twin.furnace.opcua.endpoints import parse_endpoint
+
+        return parse_endpoint(v).url
+
+
+Plant = Annotated[SimulatedPlant | OpcUaPlant, Field(discriminator="kind")]
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: float = Field(240.0, gt=0.0, le=MAX_DURATION_S, description="s")
@@ -101,6 +128,22 @@ class Scenario(_Model):
     mismatch: Mismatch = Field(default_factory=Mismatch)
     tc_noise: float = Field(1.0, ge=0.0, le=50.0, description="TC noise standard deviation, K")
     seed: int = Field(0, ge=0, le=2**31 - 1)
+    plant: Plant = Field(default_factory=SimulatedPlant, description="the furnace: simulated, or over OPC UA")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _real_time_plant(cls, data: Any) -> Any:
+        """A furnace over OPC UA runs at real time: its speed defaults to 1."""
+        if isinstance(data, dict) and isinstance(data.get("plant"), dict) and data["plant"].get("kind") == "opcua":
+            data = {**data}
+            data.setdefault("speed", 1.0)
+        return data
+
+    @model_validator(mode="after")
+    def _speed_of_plant(self) -> Scenario:
+        if self.plant.kind == "opcua" and self.speed != 1.0:
+            raise ValueError(f"speed: a furnace over OPC UA runs in real time; speed must be 1 (got {self.speed!r})")
+        return self
 
     @field_validator("tc4")
     @classmethod

@@ -33,6 +33,7 @@ class _RealLike:
     """A furnace as a real one looks to the loop: no true field, TC2 lost from 1 s on."""
 
     kind = "test"
+    realtime = False
 
     def __init__(self, inner: SimulatedFurnace) -> None:
         self.inner = inner
@@ -57,6 +58,9 @@ class _RealLike:
 
     def true_field(self):
         return None
+
+    def drain_events(self):
+        return ()
 
     def close(self) -> None:
         self.inner.close()
@@ -89,6 +93,13 @@ def test_missing_readings_are_recorded_as_nan_and_left_out_of_the_update(truthle
     lost = [s for s in snaps if s.t >= 1.0 - 1e-9]
     assert lost and all(np.isnan(s.tc[1]) and np.isfinite(s.tc[[0, 2, 3]]).all() for s in lost)
     assert not loop.estimator.last_info.used[1] and loop.estimator.last_info.used[[0, 2]].all()
+    # each such sample counts as late, in the snapshots, the stored status and the metrics
+    assert [s.late_samples for s in lost] == list(range(1, len(lost) + 1)) and loop.late_samples == len(lost)
+    status = loop.timeseries()["tc_status"]
+    assert status.shape == (len(snaps), 4) and (status[-len(lost):, 1] == 2).all() and (status[:-len(lost)] == 0).all()
+    assert loop.metrics()["late_samples"] == len(lost)
+    events = [e for s in snaps for e in s.events]
+    assert sum("late: no TC2 in time" in e for e in events) == 1  # one event when the run of late samples starts
     # the run still tracks its reference with two TCs (the mean error stays within a few kelvin)
     assert abs(snaps[-1].T_mean_hat - snaps[-1].T_ref) < 20.0
 

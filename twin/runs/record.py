@@ -4,7 +4,8 @@ A :class:`Snapshot` is one sample of a closed-loop run; a :class:`RunRecord` col
 growing arrays and writes them in the ``timeseries.npz`` layout:
 
 * per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
-  ``u``, ``u_ff`` (n, 6) fractions of u_max;
+  ``u``, ``u_ff`` (n, 6) fractions of u_max; ``tc_status`` (n, 4) int8, :data:`TC_STATUS_CODES` of each
+  reading (0 good, 1 bad, 2 missing: late or lost);
 * fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
   only when the furnace is a simulation (a real furnace has no true field);
 * events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
@@ -44,6 +45,8 @@ Array = NDArray[np.float64]
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 FIELD_SERIES = ("field_hat", "field_true")
+#: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
+TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,8 @@ class Snapshot:
     true_mean: float | None
     true_inhomogeneity: float | None
     events: tuple[str, ...] = ()
+    tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
+    late_samples: int = 0  # samples of the run so far with a reading that did not come in time
 
 
 @dataclass(frozen=True)
@@ -148,6 +153,7 @@ class RunRecord:
     def append(self, snap: Snapshot) -> None:
         """Add one sample (its events too)."""
         values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
+        values["tc_status"] = [TC_STATUS_CODES[st] for st in snap.tc_status] if snap.tc_status else [0] * len(snap.tc)
         values["field_hat"] = snap.field_hat
         if self.has_truth:
             if snap.field_true is None:
@@ -155,7 +161,7 @@ class RunRecord:
             values["field_true"] = snap.field_true
         if not self._columns:
             for k, v in values.items():
-                dtype = np.float32 if k in FIELD_SERIES else float
+                dtype = np.float32 if k in FIELD_SERIES else (np.int8 if k == "tc_status" else float)
                 self._columns[k] = _Column(np.shape(v), dtype)
         for k, v in values.items():
             self._columns[k].append(v)
@@ -169,6 +175,8 @@ class RunRecord:
         for k in SAMPLE_SERIES:
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros(0)
+        col = self._columns.get("tc_status")
+        out["tc_status"] = col.view().copy() if col is not None else np.zeros((0, 4), np.int8)
         for k in FIELD_SERIES:
             if k == "field_true" and not self.has_truth:
                 continue
