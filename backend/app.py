@@ -21,7 +21,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
 from backend.routes import files, health, runs, stream
-from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
+from backend.run_manager import LimitExceeded, PlantBusy, RunManager, RunNotActive, RunNotFound, TooManyRuns
 from backend.run_worker import ChangeRejected, LoopFactory
 from backend.settings import Settings
 from twin.config import FurnaceConfig, load_config
@@ -116,6 +116,7 @@ def create_app(
     app.include_router(stream.router)
     app.add_exception_handler(RunNotFound, _error(status.HTTP_404_NOT_FOUND))
     app.add_exception_handler(RunNotActive, _error(status.HTTP_409_CONFLICT))
+    app.add_exception_handler(PlantBusy, _error(status.HTTP_409_CONFLICT))
     app.add_exception_handler(TooManyRuns, _error(status.HTTP_429_TOO_MANY_REQUESTS))
     app.add_exception_handler(LimitExceeded, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))
     app.add_exception_handler(ChangeRejected, _error(status.HTTP_422_UNPROCESSABLE_CONTENT))

@@ -4,7 +4,8 @@ Keys of the contract: ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K, fill
 estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``, ``tc_hat``
 (the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
 of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
-(unix s when the sample was computed, for latency), ``status`` and ``events``.
+(unix s when the sample was computed, for latency), ``status``, ``events`` and ``late_samples`` (samples
+of a real-time furnace whose readings did not all come in time, so far).
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ class SnapshotLike(Protocol):
     def true_inhomogeneity(self) -> float | None: ...
     @property
     def events(self) -> Any: ...
+    @property
+    def late_samples(self) -> int: ...
 
 
 def finite_or_none(x: Any) -> float | None:
@@ -86,6 +89,7 @@ def scalar_values(s: SnapshotLike) -> dict[str, Any]:
         "inhomogeneity": finite_or_none(s.inhomogeneity),
         "true_mean": finite_or_none(s.true_mean),
         "true_inhomogeneity": finite_or_none(s.true_inhomogeneity),
+        "late_samples": int(s.late_samples),
     }
 
 

@@ -25,6 +25,7 @@ from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, LoopLike, RunWorker
 from backend.settings import Settings
 from twin.config import FurnaceConfig
+from twin.furnace.interface import FurnaceLost
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -45,13 +46,20 @@ class TooManyRuns(RuntimeError):
 
 
 class LimitExceeded(ValueError):
-    """The scenario asks for more than the server allows (run length, speed) (422)."""
+    """The scenario asks for more than the server allows (run length, speed, a furnace it may not or cannot
+    reach) (422)."""
+
+
+class PlantBusy(RuntimeError):
+    """Another run already drives that furnace (409)."""
 
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily), on the
+    scenario's furnace (:func:`twin.furnace.connect.open_furnace`; an OPC UA one with ``settings.opcua``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, settings: Settings | None = None) -> None:
+        self.settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
@@ -92,11 +100,25 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
+    def check_plant(self, cfg: FurnaceConfig, scenario: Scenario) -> None:
+        """Raise (``ValueError`` / ``OSError`` with a message) if the scenario's furnace cannot be used; for a
+        furnace over OPC UA this connects and finds its nodes, writing nothing (blocking: call it in a thread)."""
+        from twin.furnace.connect import probe_furnace
+
+        probe_furnace(cfg, scenario, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
+
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+        from twin.furnace.connect import open_furnace
         from twin.runs.loop import ClosedLoop
 
-        # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg), background=True)
+        radiation = self.radiation(cfg)
+        furnace = open_furnace(cfg, scenario, radiation, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
+        try:
+            # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
+            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=radiation, furnace=furnace, background=True)
+        except BaseException:
+            furnace.close()
+            raise
         return loop
 
 
@@ -125,7 +147,7 @@ class RunManager:
         self.settings = settings
         self.cfg = cfg
         self.repo = repo
-        self.loop_factory: LoopFactory = loop_factory or DefaultLoopFactory()
+        self.loop_factory: LoopFactory = loop_factory or DefaultLoopFactory(settings)
         self.active: dict[str, ActiveRun] = {}
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self.event_loop: asyncio.AbstractEventLoop | None = None
@@ -155,6 +177,7 @@ class RunManager:
                 await asyncio.to_thread(check, self.cfg, scenario.reference)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
+        await self._check_plant(scenario)
         running = sum(1 for a in self.active.values() if a.status in ("queued", "starting", "running"))
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -176,6 +199,29 @@ class RunManager:
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
         return run_id
+
+    async def _check_plant(self, scenario: Scenario) -> None:
+        """A furnace over OPC UA: on this server's allow-list, driven by no other run, and reachable with
+        every node the twin needs (:meth:`DefaultLoopFactory.check_plant`, off the event loop)."""
+        plant = scenario.plant
+        if plant.kind == "simulated":
+            return
+        from twin.furnace.connect import EndpointNotAllowed, check_endpoint
+
+        try:
+            check_endpoint(plant.endpoint, self.settings.opcua)
+        except EndpointNotAllowed as exc:
+            raise LimitExceeded(f"plant.endpoint: {exc}") from None
+        for run_id, run in self.active.items():
+            other = run.worker.scenario.plant
+            if other.kind == plant.kind and getattr(other, "endpoint", None) == plant.endpoint:
+                raise PlantBusy(f"run {run_id} already drives the furnace at {plant.endpoint}: stop it first")
+        check = getattr(self.loop_factory, "check_plant", None)
+        if callable(check):
+            try:
+                await asyncio.to_thread(check, self.cfg, scenario)
+            except (ValueError, OSError) as exc:
+                raise LimitExceeded(f"plant.endpoint: {exc}") from None
 
     def _set_status(self, run_id: str, run: ActiveRun, status: str, error: str | None = None) -> None:
         run.status = status
@@ -242,6 +288,9 @@ class RunManager:
             final = "interrupted"
             error = "the server shut down during the run"
             raise
+        except FurnaceLost as exc:  # its data so far is kept (finalize below), the lamps commanded off if possible
+            log.error("run %s: furnace lost: %s", run_id, exc)
+            final, error = "plant_lost", str(exc)
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"

@@ -4,7 +4,9 @@
 writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its database
 rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
 each call steps the loop as far as the speed allows (real time x factor, or as fast as
-possible) for at most a small wall-time budget and returns the latest snapshot.
+possible) for at most a small wall-time budget and returns the latest snapshot.  A loop on a
+real-time furnace (``paced_by_furnace``) is not paced here: its step waits, in this thread, for the
+furnace's next sample, so the furnace's clock drives the run and the server's event loop never waits.
 Reference / oscillation changes are queued and applied between two samples, in this
 thread (they re-plan, which may take seconds), never on the event loop.
 """
@@ -36,6 +38,9 @@ class LoopLike(Protocol):
 
     @property
     def done(self) -> bool: ...
+
+    @property
+    def paced_by_furnace(self) -> bool: ...  # a real-time furnace: step() waits for its samples
 
     def step(self) -> Any: ...
 
@@ -195,7 +200,7 @@ class RunWorker:
             if self._apply_changes():
                 self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
             next_t = (float(self.latest.t) if self.latest is not None else 0.0) + t_s
-            if self.speed is not None:
+            if self.speed is not None and not self.loop.paced_by_furnace:
                 due = self._origin_wall + (next_t - self._origin_t) / self.speed
                 wait = due - time.monotonic()
                 if wait > 0:

@@ -74,6 +74,9 @@ def explain(exc: BaseException, s: LinkSettings) -> str:
                     ua.StatusCodes.BadSecurityChecksFailed):
             return (f"{s.endpoint} does not accept security {s.options.security!r} "
                     f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): {name}")
+    if isinstance(exc, ua.UaError) and "No matching endpoints" in str(exc):
+        return (f"{s.endpoint} does not accept security {s.options.security!r} "
+                f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): it offers no such endpoint")
     return f"{s.endpoint}: {name}: {exc}"
 
 
