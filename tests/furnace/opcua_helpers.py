@@ -50,7 +50,8 @@ def endpoint(port: int) -> str:
     return f"opc.tcp://127.0.0.1:{port}/furnace-twin/"
 
 
-def wait_listening(port: int, timeout: float, proc: subprocess.Popen[bytes] | None = None, log: Path | None = None) -> None:
+def wait_listening(port: int, timeout: float, proc: subprocess.Popen[bytes] | None = None,
+                   log: Path | None = None) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if proc is not None and proc.poll() is not None:

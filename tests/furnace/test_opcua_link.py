@@ -63,8 +63,8 @@ class Faulty:
 
 
 def make_emulator(furnace, port: int, node_map: NodeMap | None = None, **kw) -> FurnaceEmulator:
-    return FurnaceEmulator(furnace, endpoint(port), node_map or NodeMap.default(GROUPS), eta_max=CFG.oscillation.eta_max,
-                           T0=CFG.specimen.initial_temperature, **kw)
+    return FurnaceEmulator(furnace, endpoint(port), node_map or NodeMap.default(GROUPS),
+                           eta_max=CFG.oscillation.eta_max, T0=CFG.specimen.initial_temperature, **kw)
 
 
 def connect(port: int, tmp_path, **options) -> OpcUaFurnace:
