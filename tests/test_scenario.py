@@ -19,6 +19,7 @@ def test_defaults_are_the_product_contract():
         "mismatch": {"emissivity": 0.0, "alpha": 0.0, "lamp_efficiency": 0.0},
         "tc_noise": 1.0,
         "seed": 0,
+        "plant": {"kind": "simulated"},  # product.md, "More scenario fields"
     }
 
 

@@ -45,7 +45,9 @@ def _row(repo: RepoDep, run_id: str) -> RunRow:
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=RunCreated, dependencies=[TokenDep],
-             responses={422: {"description": "invalid scenario or over the server's limits"},
+             responses={422: {"description": "invalid scenario, over the server's limits, or a furnace it may "
+                                              "not or cannot reach"},
+                        409: {"description": "another run already drives that furnace"},
                         429: {"description": "too many runs at once"}})
 async def start_run(manager: ManagerDep, scenario: Annotated[Scenario, Body()] = DEFAULT_SCENARIO) -> RunCreated:
     """Start a closed-loop run of the scenario (every field has a default). 201 with the run id."""

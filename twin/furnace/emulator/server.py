@@ -11,7 +11,10 @@ accumulate) the emulator
    wall time as the source timestamp.
 
 A tick that comes late (a loaded machine) advances the furnace by every sample it missed before it
-publishes, so the furnace's time stays the wall clock's.  :class:`twin.furnace.emulator.timing.TimingRecord`
+publishes, so the furnace's time stays the wall clock's.  With ``load_on_first_client`` the specimen
+waits outside the furnace (at its initial temperature, the furnace's time at 0) until a client first
+turns the lamps on with its watchdog, as when a lab loads a cold specimen and starts the twin; otherwise
+the specimen sits in the furnace from the start and takes up the heat of its surroundings.  :class:`twin.furnace.emulator.timing.TimingRecord`
 keeps the reading and write times for the jitter and latency figures.
 """
 
@@ -50,11 +53,13 @@ class FurnaceEmulator:
     T0 : the TCs' value before the first tick (K)
     security : ``none`` or ``sign-encrypt``; ``cert_dir`` holds the certificates
     users : user name -> password; when given, only they get a session
+    load_on_first_client : the specimen enters the furnace when a client first enables the lamps
     """
 
     def __init__(self, furnace: Furnace, endpoint: str, node_map: NodeMap, *, eta_max: float, T0: float,
                  security: str = "none", cert_dir: str | Path = "furnace-data/opcua",
-                 users: dict[str, str] | None = None, watchdog_s: float = WATCHDOG_TIMEOUT_S) -> None:
+                 users: dict[str, str] | None = None, watchdog_s: float = WATCHDOG_TIMEOUT_S,
+                 load_on_first_client: bool = False) -> None:
         self.furnace = furnace
         self.endpoint = endpoint
         self.node_map = node_map
@@ -65,6 +70,7 @@ class FurnaceEmulator:
         self.t_s = float(furnace.t_s)
         self.t = 0.0  # the furnace's time (s since the emulator started)
         self.overruns = 0  # ticks that had to catch up on missed samples
+        self.loaded = not load_on_first_client  # the specimen is in the furnace (its time runs)
         self.server: Any = None
         self.space: AddressSpace | None = None
         self._oscillation = furnace.motion(0.0).oscillation
@@ -148,6 +154,12 @@ class FurnaceEmulator:
                 log.debug("tick %d came %.1f ms late: advancing %d samples", k + 1, 1000 * (now - due), steps)
             k += steps
             self.interlock.check(now)
+            if not self.loaded:
+                if not self.interlock.lamps_enabled:  # still waiting outside: same state, a new time stamp
+                    await self._publish(readings, eta, stamp)
+                    continue
+                self.loaded, steps = True, 1
+                log.info("a client enabled the lamps: the specimen is in the furnace, its time starts")
             spec = self._drive()
             if spec != self._oscillation:
                 self.furnace.set_oscillation(spec, self.t)
