@@ -7,11 +7,11 @@ from __future__ import annotations
 import socket
 
 import pytest
-from conftest import fake_factory, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import fake_factory, wait_status
 from twin.furnace.opcua.options import OpcUaOptions
 
 

@@ -81,12 +81,13 @@ def emulate_command(cfg: FurnaceConfig, args: Any) -> int:
     from twin.furnace.opcua.nodes import MappingError, load_mapping
     from twin.furnace.opcua.options import certificate_dir
     from twin.furnace.simulated import SimulatedFurnace
+    from twin.limits import scenario_limits
     from twin.radiation import radiation_model
     from twin.runs.runner import ScenarioError, load_scenario
 
     try:
         endpoint, users = check_arguments(args)
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario, scenario_limits(cfg))
         node_map = load_mapping(args.mapping, [g.name for g in cfg.lamps.groups])
     except (EmulateError, ScenarioError, MappingError) as exc:
         print(f"furnace-twin emulate: {exc}", file=sys.stderr)  # noqa: T201

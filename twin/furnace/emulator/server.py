@@ -14,8 +14,9 @@ A tick that comes late (a loaded machine) advances the furnace by every sample i
 publishes, so the furnace's time stays the wall clock's.  With ``load_on_first_client`` the specimen
 waits outside the furnace (at its initial temperature, the furnace's time at 0) until a client first
 turns the lamps on with its watchdog, as when a lab loads a cold specimen and starts the twin; otherwise
-the specimen sits in the furnace from the start and takes up the heat of its surroundings.  :class:`twin.furnace.emulator.timing.TimingRecord`
-keeps the reading and write times for the jitter and latency figures.
+the specimen sits in the furnace from the start and takes up the heat of its surroundings.
+:class:`twin.furnace.emulator.timing.TimingRecord` keeps the reading and write times for the jitter and
+latency figures.
 """
 
 from __future__ import annotations
