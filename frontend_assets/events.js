@@ -33,11 +33,12 @@ export function noteStatus(status, t) {
   state.lastStatus = status;
   if (first && !LIVE.includes(status)) return;
   const run = state.run;
-  const kind = status === "error" ? "err" : (status === "interrupted" ? "warn" : "");
-  addEvent(t, `run ${status}${status === "error" && run && run.error ? `: ${run.error}` : ""}`, kind);
+  const failed = status === "error" || status === "plant_lost"; // plant_lost: the furnace's link was not restored
+  const kind = failed ? "err" : (status === "interrupted" ? "warn" : "");
+  addEvent(t, `run ${status}${failed && run && run.error ? `: ${run.error}` : ""}`, kind);
   if (state.stopping === state.runId && !LIVE.includes(status)) { // the Stop reply, completed
     showMsg(`run ${state.runId} ${status}${t !== null && t !== undefined ? ` at t = ${fmt(t)} s` : ""}; its data is kept`);
     state.stopping = null;
   }
-  if (status === "error" && run && run.error) showMsg(`run ${run.id} failed: ${run.error}`, true);
+  if (failed && run && run.error) showMsg(`run ${run.id} ${status === "plant_lost" ? "lost its furnace" : "failed"}: ${run.error}`, true);
 }

@@ -25,11 +25,17 @@ function scenarioFromForm(form) {
   const speedText = v("speed").trim();
   const reference = refMode("refmode") === "points" ? { points: parsePoints(v("points"), pointLimits()) }
     : { setpoint: num("setpoint"), t_E: num("t_E") };
-  return {
+  const common = {
     reference,
     duration: num("duration"),
     oscillation: { enabled: form.elements.osc.checked, amplitude: num("amplitude"), period: num("period") },
     tc4: [num("tc4x"), num("tc4y")],
+  };
+  if (refMode("plant") === "opcua") { // a real furnace: its own clock (speed 1), its own noise and deviations
+    return { ...common, plant: { kind: "opcua", endpoint: v("endpoint").trim() } };
+  }
+  return {
+    ...common,
     speed: speedText === "max" ? "max" : Number(speedText),
     mismatch: { emissivity: num("m_eps"), alpha: num("m_alpha"), lamp_efficiency: num("m_lamp") },
     tc_noise: num("tc_noise"),
@@ -115,7 +121,7 @@ export function wireForms() {
     setToken(ev.target.value.trim());
     ev.target.classList.remove("need");
   });
-  for (const name of ["refmode", "live-refmode"]) {
+  for (const name of ["refmode", "live-refmode", "plant"]) {
     for (const el of document.querySelectorAll(`input[name="${name}"]`)) el.addEventListener("change", () => showRefMode(name));
     showRefMode(name);
   }

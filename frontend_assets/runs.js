@@ -15,11 +15,28 @@ function setControls(run) {
   setLiveOscillation(run ? run.oscillation : null);
 }
 
+// The furnace a run drives; over OPC UA with the samples that came late (live from the stream, else the metrics).
+function describePlant(run) {
+  const plant = run.scenario.plant || { kind: "simulated" };
+  if (plant.kind !== "opcua") return "simulated furnace";
+  const frame = state.lastFrame && state.lastFrame.run_id === run.id ? state.lastFrame : null;
+  const late = frame ? frame.late_samples : (run.metrics || {}).late_samples;
+  return `furnace over OPC UA ${plant.endpoint} (real time, no truth)${late !== undefined && late !== null ? ` · ${late} late samples` : ""}`;
+}
+
+// Metric rows: relative errors in %, counts as they are; a furnace without truth has no true_* rows.
+function metricRows(run) {
+  const real = run.scenario.plant && run.scenario.plant.kind === "opcua";
+  return Object.entries(run.metrics || {})
+    .filter(([k, v]) => !(real && v === null && (k.startsWith("true_") || k.startsWith("field_estimation"))))
+    .map(([k, v]) => (k === "late_samples" ? `<tr><td>${k}</td><td class="num">${v}</td></tr>`
+      : `<tr><td>${k}</td><td class="num">${pct(v)} %</td></tr>`)).join("");
+}
+
 function renderRunInfo(run) {
   if (!run) return;
-  const m = run.metrics || {};
   const sc = run.scenario;
-  const rows = Object.entries(m).map(([k, v]) => `<tr><td>${k}</td><td class="num">${pct(v)} %</td></tr>`).join("");
+  const rows = metricRows(run);
   const files = run.files || {};
   const links = [
     files.recording ? `<a href="${run.links.recording}" download>recording.rrd</a>` : "",
@@ -31,6 +48,7 @@ function renderRunInfo(run) {
     <div><b>${run.id}</b> · ${run.status}${run.error ? ` · <span style="color:#c53030">${run.error}</span>` : ""}</div>
     <div class="muted">reference ${describeReference(run.reference)} · oscillation ${describeOscillation(run.oscillation)} (${now})
       · ${sc.duration} s · speed ${sc.speed} · TC4 (${sc.tc4.join(", ")})</div>
+    <div class="muted">${describePlant(run)}</div>
     <div>${links}</div>
     ${rows ? `<div class="muted">metrics, relative to the setpoint</div><table>${rows}</table>` : `<div class="muted">metrics when the run ends</div>`}`;
 }
@@ -62,7 +80,7 @@ export async function selectRun(runId) {
     addEvent(ch.applied_t, `${what}: ${ch.status}${ch.message ? ` (${ch.message})` : ""}`, ch.status === "applied" ? "" : "warn");
   }
   addEvent(run.latest ? run.latest.t : null, `run ${run.status}${run.error ? `: ${run.error}` : ""}`,
-    run.status === "error" ? "err" : (run.status === "interrupted" ? "warn" : ""));
+    ["error", "plant_lost"].includes(run.status) ? "err" : (run.status === "interrupted" ? "warn" : ""));
   state.tc4 = run.scenario.tc4;
   if (LIVE.includes(run.status)) {
     connectStream(runId, () => { refreshRun(); refreshHistory(); });

@@ -20,9 +20,9 @@ export function connectStream(runId, onEnd) {
     state.lastFrame = f;
     state.frames += 1;
     pushFrame(state.series, f);
-    $("run-clock").textContent = `t = ${fmt(f.t)} s`;
+    $("run-clock").textContent = `t = ${fmt(f.t)} s${f.late_samples ? ` · ${f.late_samples} late` : ""}`;
     if (f.seq === undefined || f.seq > state.eventSeq) { // the last frame of a run may repeat its sample
-      for (const e of f.events || []) addEvent(f.t, e, /fail|error|reject/i.test(e) ? "warn" : "");
+      for (const e of f.events || []) addEvent(f.t, e, /fail|error|reject| late:|lost/i.test(e) ? "warn" : "");
       if (f.seq !== undefined) state.eventSeq = f.seq;
     }
     if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
