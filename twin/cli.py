@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--hil", action="store_true",
+                   help="instead: hardware-in-the-loop timing against furnace-twin emulate (real time)")
+    s.add_argument("--duration", type=float, default=300.0, help="--hil: seconds of real time (default 300)")
 
     s = sub.add_parser("emulate", help="the simulated furnace served in real time over OPC UA (hardware in the loop)")
     from twin.furnace.emulator.command import add_arguments as emulate_arguments

@@ -65,6 +65,7 @@ class TimingRecord:
         unanswered = sum(1 for k in range(max(first, 0), last + 1) if k not in answered)
         return {
             "readings": int(len(r)), "writes": int(len(w)),
+            "twin_periods_s": [round(float(x), 6) for x in np.diff(w)],  # raw, for other statistics
             "emulator_period_ms": percentiles_ms(np.diff(r)),
             "twin_period_ms": percentiles_ms(np.diff(w)),
             "tc_to_lamp_ms": percentiles_ms(latency),
