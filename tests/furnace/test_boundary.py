@@ -29,6 +29,25 @@ def test_the_twin_side_never_imports_the_simulated_furnace() -> None:
     assert not [m for m in loaded if m.startswith("twin.furnace.simulated")], loaded
 
 
+def test_the_opcua_adapter_needs_no_simulation() -> None:
+    """The plant adapter is the furnace side of a real installation: it never loads the simulated furnace."""
+    code = ("import json, sys\nimport twin.furnace.opcua.furnace, twin.furnace.connect\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('twin.furnace'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = json.loads(out.strip().splitlines()[-1])
+    assert "twin.furnace.opcua.furnace" in loaded
+    assert not [m for m in loaded if m.startswith(("twin.furnace.simulated", "twin.furnace.emulator"))], loaded
+
+
+def test_a_simulated_sample_read_again_is_the_same(small_radiation) -> None:
+    """The loop reads t = 0 twice (initial estimate, first step): the same readings, no new noise draw."""
+    f = SimulatedFurnace(small_config(), small_radiation, tc_noise=2.0, seed=3)
+    first, again = f.read(0.0), f.read(0.0)
+    assert np.array_equal(first.values, again.values)
+    f.apply(np.zeros(6), 0.0)
+    assert not np.array_equal(f.read(0.1).values, first.values)
+
+
 class _RealLike:
     """A furnace as a real one looks to the loop: no true field, TC2 lost from 1 s on."""
 
