@@ -97,3 +97,13 @@ def test_a_reader_wakes_when_its_sample_is_complete() -> None:
     t.join(timeout=5)
     assert got and all(r is not None for r in got[0])
     assert got[1] < 0.4, "the reader waited for the deadline instead of waking on the sample"
+
+
+def test_a_dead_first_channel_does_not_stop_the_run_clock() -> None:
+    buf = SampleBuffer(T_S, 2, late_s=0.05)
+    for k in range(3):
+        publish(buf, k, channels=(1,))  # TC1 never reports
+    assert buf.anchor(0.0, now=10.21) is not None
+    publish(buf, 3, channels=(1,))
+    got = buf.take(1, now=Clock(10.36))
+    assert got[0] is None and got[1] is not None and got[1].value == 303.0

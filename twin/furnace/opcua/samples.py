@@ -1,8 +1,8 @@
 """Readings of a real-time furnace grouped into the twin's samples by their source timestamps.
 
 The furnace's clock drives the samples.  Each reading of a channel (TC1..TC4, Eta) arrives with the
-furnace's source timestamp.  :meth:`SampleBuffer.anchor` makes the newest reading of the first channel
-run time 0 (the start of a run); from then on a reading belongs to sample
+furnace's source timestamp.  :meth:`SampleBuffer.anchor` makes the newest reading (of any channel, so a
+dead TC does not stop a run) run time 0 (the start of a run); from then on a reading belongs to sample
 
     k = round((source time - origin) / t_s),
 
@@ -55,7 +55,7 @@ class SampleBuffer:
     Parameters
     ----------
     t_s : the sample time (s)
-    n_channels : channels per sample (channel 0 anchors the run clock)
+    n_channels : channels per sample
     late_s : how long after it is due a sample may still come (s)
     """
 
@@ -65,7 +65,7 @@ class SampleBuffer:
         self._origin: float | None = None  # source time of t = 0 (unix s)
         self._slots: dict[int, list[Reading | None]] = {}
         self._newest: list[Reading | None] = [None] * self.n
-        self._delays: deque[float] = deque(maxlen=delay_window)  # arrival - (source - origin), channel 0
+        self._delays: deque[float] = deque(maxlen=delay_window)  # arrival - (source - origin), all channels
         self._taken = -1  # the last sample handed out
         self.last_arrival = -math.inf
         self.dropped_late = 0  # readings that came after their sample was handed out (or far ahead)
@@ -86,8 +86,7 @@ class SampleBuffer:
         assert self._origin is not None
         rel = r.source_s - self._origin
         k = round(rel / self.t_s)
-        if channel == 0:
-            self._delays.append(r.arrival - rel)
+        self._delays.append(r.arrival - rel)
         if k <= self._taken or k > self._taken + 1000:
             self.dropped_late += 1
             return
@@ -97,18 +96,22 @@ class SampleBuffer:
 
     # ---- the run's thread
     def anchor(self, timeout_s: float, *, now: float | None = None) -> Reading | None:
-        """Start the run clock: the newest reading of channel 0, if it arrived within the last period (else the
-        next one, waiting up to ``timeout_s``), becomes t = 0; sample 0 holds the newest reading of every
-        channel taken within half a period of it.  ``None`` if no fresh reading came."""
+        """Start the run clock: the newest reading, if it arrived within the last period (else the next one,
+        waiting up to ``timeout_s``), becomes t = 0; sample 0 holds the newest reading of every channel taken
+        within half a period of it.  ``None`` if no fresh reading came."""
         t_call = time.monotonic() if now is None else now
         with self._cond:
+            def newest() -> Reading | None:
+                readings = [r for r in self._newest if r is not None]
+                return max(readings, key=lambda r: r.source_s) if readings else None
+
             def fresh() -> bool:
-                r0 = self._newest[0]
-                return r0 is not None and r0.arrival >= t_call - self.t_s
+                r = newest()
+                return r is not None and r.arrival >= t_call - self.t_s
 
             if not fresh():
                 self._cond.wait_for(fresh, timeout=timeout_s)
-            r0 = self._newest[0]
+            r0 = newest()
             if r0 is None or not fresh():
                 return None
             self._origin = r0.source_s
