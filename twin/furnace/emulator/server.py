@@ -3,7 +3,8 @@
 Every sample time t_s of the wall clock (ticks at fixed times from the start, so lateness does not
 accumulate) the emulator
 
-1. checks the interlock (:class:`WatchdogInterlock`: lamps off when the watchdog has been still for 1 s);
+1. checks the interlock (:class:`WatchdogInterlock`: lamps off when the watchdog has been still for 1 s;
+   a separate task also checks it every ``INTERLOCK_CHECK_S``, so a trip does not wait for a late tick);
 2. applies a changed drive setting (``OscillationEnabled``, ``Amplitude``, ``Period``) to the furnace;
 3. advances the furnace over the past sample with the setpoints in force (zero if the interlock is off),
    in a worker thread so the OPC UA server's event loop keeps answering;
@@ -40,6 +41,8 @@ from twin.furnace.opcua.security import PasswordUsers, secure_server
 from twin.scenario import OscillationSpec
 
 log = logging.getLogger(__name__)
+
+INTERLOCK_CHECK_S = 0.05  # the watchdog is checked this often besides every tick
 
 
 class FurnaceEmulator:
@@ -132,8 +135,26 @@ class FurnaceEmulator:
         values[names.LAMPS_ENABLED] = (self.interlock.lamps_enabled, True)
         await self.space.publish(values, stamp)
 
+    async def _watch_interlock(self, stop: asyncio.Event) -> None:
+        """Trip the interlock as soon as the watchdog is overdue, and publish ``LampsEnabled`` at once."""
+        assert self.space is not None
+        while not stop.is_set():
+            if self.interlock.check(time.monotonic()):
+                await self.space.publish({names.LAMPS_ENABLED: (False, True)}, utc_now())
+            try:
+                await asyncio.wait_for(stop.wait(), timeout=INTERLOCK_CHECK_S)
+            except TimeoutError:
+                pass
+
     async def run(self, stop: asyncio.Event) -> None:
         """Tick in real time until ``stop`` is set."""
+        watcher = asyncio.get_running_loop().create_task(self._watch_interlock(stop))
+        try:
+            await self._ticks(stop)
+        finally:
+            watcher.cancel()
+
+    async def _ticks(self, stop: asyncio.Event) -> None:
         assert self.space is not None
         readings, eta = self.furnace.read(0.0), self.furnace.motion(0.0).eta
         start = time.monotonic()
