@@ -145,13 +145,20 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
     from twin.furnace.connect import open_furnace
     from twin.radiation import radiation_model
 
-    radiation = radiation_model(cfg)
+    # a simulated furnace needs the radiation model; a furnace over OPC UA is connected first, so an
+    # endpoint the run cannot use fails at once, before the model is loaded
+    radiation = radiation_model(cfg) if scenario.plant.kind == "simulated" else None
     try:
         furnace = open_furnace(cfg, scenario, radiation, data_dir=os.environ.get("FURNACE_TWIN_DATA_DIR",
                                                                                  "furnace-data"))
     except (ValueError, OSError) as exc:
         print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
         return 2
+    try:
+        radiation = radiation if radiation is not None else radiation_model(cfg)
+    except BaseException:
+        furnace.close()
+        raise
     try:
         loop = ClosedLoop(cfg, scenario, radiation, furnace=furnace)
     except BaseException:
