@@ -208,6 +208,31 @@ def test_reconnection_within_the_window_and_loss_after_it(emulated, tmp_path) ->
         proxy.close()
 
 
+def test_a_silent_furnace_is_given_up_and_its_lamps_commanded_off(emulated, tmp_path) -> None:
+    """The link stays up but no readings come (the furnace's controller hangs): after reconnect_s the run
+    gives the furnace up, and closing it still writes the lamps off over the live link."""
+    emu, furnace, port = emulated
+    twin = connect(port, tmp_path, reconnect_s=1.0)
+    try:
+        twin.read(0.0)
+        t = CFG.sampling.t_s
+        for j in range(1, 4):
+            twin.apply(np.full(6, 0.8), (j - 1) * t)
+            twin.read(j * t)
+        time.sleep(0.3)
+        assert emu.emulator.space.value("T2h") == pytest.approx(0.8)
+        furnace.stall_s = 2.5  # the next readings come 2.5 s late
+        with pytest.raises(FurnaceLost, match="no readings from the furnace"):
+            for j in range(4, 100):
+                twin.apply(np.full(6, 0.8), (j - 1) * t)
+                twin.read(j * t)
+        assert twin._link.state == "connected"  # given up, but the link is still there ...
+    finally:
+        twin.close()
+        furnace.stall_s = 0.0
+    assert all(emu.emulator.space.value(g) == 0.0 for g in GROUPS)  # ... so the lamps went off
+
+
 MAPPING = """object = "Plant/Annealer"
 [nodes]
 TC1 = {node = "Sensors/TE101", offset = -273.15}

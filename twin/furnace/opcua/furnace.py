@@ -110,11 +110,15 @@ class OpcUaFurnace:
             self._watchdog_modulus = _COUNTER_MODULUS.get(self._link.nodes[names.WATCHDOG].variant_type.name, 2**15)
             self._watchdog = int(start[names.WATCHDOG] or 0) % self._watchdog_modulus
             self._write({**dict.fromkeys(self._groups, 0.0), **self._drive_values(self._oscillation)})
-        except BaseException as exc:
+        except FurnaceUnavailable:
             self._shutdown()
-            if isinstance(exc, FurnaceUnavailable):
-                raise
+            raise
+        except Exception as exc:
+            self._shutdown()
             raise FurnaceUnavailable(f"{endpoint}: setting up the furnace failed: {type(exc).__name__}: {exc}") from exc
+        except BaseException:
+            self._shutdown()
+            raise
 
     # ---- the Furnace protocol
     @property
@@ -132,16 +136,13 @@ class OpcUaFurnace:
 
     def _check_alive(self) -> None:
         link = self._link
-        if link.state == "lost":
+        if link.lost:
             raise FurnaceLost(link.lost_reason or "the link to the furnace is lost")
         silent = time.monotonic() - max(self._buffer.last_arrival, link.connected_since)
         if link.state == "connected" and silent > max(self.options.reconnect_s, 2 * self.t_s):
-            self._io.submit(self._declare_lost(f"no readings from the furnace for {silent:.1f} s "
-                                               f"(allowed: {self.options.reconnect_s:g} s)")).result(WRITE_TIMEOUT_S)
+            link.declare_lost(f"no readings from the furnace for {silent:.1f} s (allowed: "
+                              f"{self.options.reconnect_s:g} s)")
             raise FurnaceLost(link.lost_reason or "the furnace sends no readings")
-
-    async def _declare_lost(self, reason: str) -> None:
-        self._link.declare_lost(reason)
 
     def read(self, t: float) -> Readings:
         """Sample j = round(t / t_s) of the furnace's clock; ``read(0.0)`` starts that clock."""
@@ -150,7 +151,7 @@ class OpcUaFurnace:
         if j == 0:
             if self._buffer.anchor(ANCHOR_TIMEOUT_S) is None:
                 raise FurnaceLost(f"the furnace at {self.endpoint} sent no readings within {ANCHOR_TIMEOUT_S:g} s")
-        slot = self._buffer.take(j, give_up=lambda: self._link.state == "lost")
+        slot = self._buffer.take(j, give_up=lambda: self._link.lost)
         self._check_alive()
         origin = self._buffer.origin or 0.0
         values, stamps, status = np.full(4, np.nan), np.full(4, np.nan), []
@@ -169,8 +170,8 @@ class OpcUaFurnace:
 
     def apply(self, u: Array, t: float) -> None:
         """Write the six setpoints (clipped to [0, 1]) and the next watchdog value; do not wait for the answer."""
-        if self._link.state != "connected":
-            return  # reconnecting: nothing to write to (the furnace's watchdog switches its lamps off)
+        if self._link.state != "connected" or self._link.lost:
+            return  # reconnecting or given up: the furnace's watchdog switches its lamps off
         prev = self._pending_write
         if prev is not None and prev.done() and prev.exception() is not None:
             self.writes_failed += 1
@@ -204,7 +205,7 @@ class OpcUaFurnace:
         return tuple(out)
 
     def close(self) -> None:
-        """Lamps off (where the link allows), then disconnect."""
+        """Lamps off (where the link allows: also when the furnace was given up with its link up), then disconnect."""
         if self._link.state == "connected":
             try:
                 self._write(dict.fromkeys(self._groups, 0.0))

@@ -6,7 +6,9 @@ A :class:`FurnaceLink` lives on one event loop (the OPC UA thread of
 ``on_reading(channel, value, good, source_s, arrival)`` from a subscription whose trigger includes the
 source timestamp, so a repeated value still counts as a new sample.  A lost link (the transport closes,
 the server stops answering, a write fails for lack of a connection) is retried every
-``RETRY_S`` for ``options.reconnect_s``; then the link is lost for good (:attr:`FurnaceLink.lost_reason`).
+``RETRY_S`` for ``options.reconnect_s``; then the furnace is given up (:attr:`FurnaceLink.lost_reason`,
+state ``down``).  The furnace may also be given up with its transport still up (:meth:`FurnaceLink.declare_lost`,
+e.g. it sends no readings): writes still go through then, so the lamps can be commanded off.
 """
 
 from __future__ import annotations
@@ -119,9 +121,9 @@ class FurnaceLink:
         self._on_reading = on_reading
         self._client: Any = None
         self.nodes: dict[str, ResolvedNode] = {}
-        self.state = "new"  # new, connected, reconnecting, lost, closed
+        self.state = "new"  # the transport: new, connected, reconnecting, down (not restored), closed
         self.connected_since = -math.inf  # monotonic s of the latest (re)connection
-        self.lost_reason: str | None = None
+        self.lost_reason: str | None = None  # set when the furnace is given up
         self.events: deque[str] = deque()  # for the run's event log (read from another thread)
         self._reconnect_task: asyncio.Task[None] | None = None
 
@@ -176,8 +178,13 @@ class FurnaceLink:
                 log.debug("dropping an OPC UA client", exc_info=True)
 
     # ---- keeping the link
+    @property
+    def lost(self) -> bool:
+        """The furnace is given up (the run ends ``plant_lost``)."""
+        return self.lost_reason is not None
+
     async def _lost(self, exc: BaseException) -> None:
-        if self.state != "connected":
+        if self.state != "connected" or self.lost:
             return
         self.state = "reconnecting"
         msg = (f"link to the furnace lost ({explain(exc, self.s)}); reconnecting for up to "
@@ -208,14 +215,15 @@ class FurnaceLink:
             return
         if self.state == "reconnecting":
             why = explain(last, self.s) if last is not None else "no attempt succeeded"
+            self.state = "down"
             self.declare_lost(f"the link to the furnace was lost and not restored within "
                               f"{self.s.options.reconnect_s:g} s ({why})")
 
     def declare_lost(self, reason: str) -> None:
-        """Give the furnace up (the run then ends ``plant_lost``)."""
-        if self.state in ("lost", "closed"):
+        """Give the furnace up (the run then ends ``plant_lost``); the transport stays as it is."""
+        if self.lost or self.state == "closed":
             return
-        self.state, self.lost_reason = "lost", reason
+        self.lost_reason = reason
         log.error(reason)
         self.events.append(reason)
 
