@@ -10,6 +10,7 @@ from typing import Any
 from backend.run_worker import LoopLike
 from backend.settings import Settings
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -25,14 +26,21 @@ class DefaultLoopFactory:
         self._radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
 
-    def radiation(self, cfg: FurnaceConfig) -> Any:
+    def radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
+        """The furnace's radiation model, loaded (or ray-traced) once; a run waiting for another caller's
+        computation stops waiting when its ``budget`` is cancelled (Stop while starting)."""
         from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
 
         key = cfg.digest()
-        with self._lock:
+        while not self._lock.acquire(timeout=0.1):
+            if budget is not None and budget.cancelled:
+                raise PlanCancelled("stopped while the radiation model was being computed")
+        try:
             if key not in self._radiation:
                 self._radiation[key] = radiation_model(cfg)
             return self._radiation[key]
+        finally:
+            self._lock.release()
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -61,6 +69,18 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
+    def check_plan(self, cfg: FurnaceConfig, scenario: Scenario, budget: PlanBudget) -> None:
+        """Raise ``twin.control.budget.PlanTooLarge`` (a ``ValueError``) if the run's first plan is estimated
+        beyond ``budget``'s time or memory, so ``POST /api/runs`` answers 422 that says why."""
+        from twin.control.reference import reference_trajectory
+        from twin.control.replan import plan_estimate
+        from twin.model.discrete import discrete_model
+
+        model = discrete_model(cfg, self.radiation(cfg), None)  # same size and cost as the averaged one
+        T0 = float(cfg.specimen.initial_temperature)
+        ref = reference_trajectory(scenario.reference, T0)
+        plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
+
     def check_plant(self, cfg: FurnaceConfig, scenario: Scenario) -> None:
         """Raise (``ValueError`` / ``OSError`` with a message) if the scenario's furnace cannot be used; for a
         furnace over OPC UA this connects and finds its nodes, writing nothing (blocking: call it in a thread)."""
@@ -68,15 +88,16 @@ class DefaultLoopFactory:
 
         probe_furnace(cfg, scenario, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
 
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
         from twin.furnace.connect import open_furnace
         from twin.runs.loop import ClosedLoop
 
-        radiation = self.radiation(cfg)
+        radiation = self.radiation(cfg, budget)
         furnace = open_furnace(cfg, scenario, radiation, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
         try:
             # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=radiation, furnace=furnace, background=True)
+            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=radiation, furnace=furnace, background=True,
+                                        budget=budget)
         except BaseException:
             furnace.close()
             raise

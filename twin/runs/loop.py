@@ -18,19 +18,21 @@ Each call of :meth:`ClosedLoop.step` returns an immutable :class:`Snapshot` of
 sample j.  Runs are deterministic for a seed.
 
 A real-time furnace (:attr:`twin.furnace.interface.Furnace.realtime`, one over OPC UA) paces the loop:
-step 1 waits in the furnace's ``read`` for its sample (never on a server's event loop: the caller's thread
+reading the TCs waits in the furnace's ``read`` for the sample (never on a server's event loop: the caller's thread
 waits).  A sample whose readings did not all come in time (status "missing") is *late*: the EKF
 updates with what came, or only predicts; late samples are counted (:attr:`ClosedLoop.late_samples`,
 ``Snapshot.late_samples``) and reported as events when a run of them starts and ends.  The first
 ``read(0.0)`` at construction gives the initial estimate; the first step reads t = 0 again, which
 starts a real-time furnace's clock after the (seconds-long) first plan.
 
-Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`)
-take effect at the next sample: the reference (and the furnace's motion) switch at
-once, while the new feedforward, reference state, gains and model are re-planned
-from the current estimate, in a background thread when ``background=True`` (the
-backend) so the loop never stalls, and swapped in at the first sample after the
-plan is ready.
+Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`) are
+re-planned (feedforward, reference state, gains, model) from the current estimate, in a
+background thread when ``background=True`` (the backend) so the loop never stalls, and take
+effect together -- reference, furnace motion and plan -- at the first sample after the plan is
+ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing).
+Each returns a future of the run time of the first sample that uses the change (a points reference's
+times count from there; a plan made for an earlier sample moves there with its reference).  Plans never reach
+far beyond the run's end, and a :class:`twin.control.budget.PlanBudget` bounds and cancels them.
 
 Example
 -------
@@ -44,11 +46,12 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,10 +59,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget
 from twin.furnace.interface import Furnace, Readings
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
+from twin.runs.replanning import Replanner
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -77,12 +83,6 @@ class _Plan:
     gains: Any
 
 
-@dataclass
-class _Pending:
-    future: Future[_Plan]
-    description: str
-
-
 class ClosedLoop:
     """A furnace + EKF + feedforward/LQG for one scenario.
 
@@ -95,6 +95,8 @@ class ClosedLoop:
     background : re-plan in a worker thread (backend) instead of inline (CLI, tests).
     plan_cache : shared between loops (the campaign): the initial plan of an identical start
         (same oscillation, reference and initial estimate) is solved once.
+    budget : wall time, memory and cancellation of every plan of the run (:mod:`twin.control.budget`);
+        the first plan uses it, each re-plan a child of it.  ``None``: no estimate, IPOPT's own limits.
     """
 
     def __init__(
@@ -106,6 +108,7 @@ class ClosedLoop:
         furnace: Furnace | None = None,
         background: bool = False,
         plan_cache: dict[Any, _Plan] | None = None,
+        budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.lqg import Controller
         from twin.estimation.ekf import Estimator
@@ -125,13 +128,16 @@ class ClosedLoop:
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
         self.furnace: Furnace = furnace
         self._lock = threading.Lock()
-        self._executor = ThreadPoolExecutor(max_workers=1) if background else None
-        self._pending: _Pending | None = None
+        self._budget = budget
+        self._replanner = Replanner(background, budget)
         self._events: list[str] = []
         self._oscillation = scenario.oscillation
         #: samples with a reading that did not come in time (a real-time furnace); ``_late_run`` the current run
         self.late_samples = 0
         self._late_run = 0
+        # a change waiting for its plan: (spec, T_ref(t)) and the oscillation, in force when it is installed
+        self._wanted_reference: tuple[Reference, Callable[[Any], Any]] | None = None
+        self._wanted_oscillation: OscillationSpec | None = None
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
@@ -145,7 +151,7 @@ class ClosedLoop:
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None, budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
@@ -164,6 +170,7 @@ class ClosedLoop:
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
         self.record = RunRecord(header, has_truth=self._has_truth)
+        self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 
@@ -187,14 +194,16 @@ class ClosedLoop:
         return reference_trajectory(spec, T_initial, t_start=t_start, T_range=self._T_range)
 
     def _plan(
-        self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any
+        self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
+        budget: PlanBudget | None = None,
     ) -> _Plan:
         """Model, feedforward and gains for the rest of the run from t0 (eqs. 11, 18-29)."""
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
         model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
-        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous)
+        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, t_stop=self.scenario.duration,
+                             budget=budget)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
@@ -202,37 +211,71 @@ class ClosedLoop:
         return _Plan(model, plan, gains)
 
     # ------------------------------------------------------------------ live changes
-    def set_reference(self, spec: Reference) -> None:
+    def set_reference(self, spec: Reference) -> Future[float]:
         """New reference from now on (times of a points reference count from now); re-plans.
 
-        Raises ValueError, before anything changes, if the reference is unreachable.
+        Raises ValueError, before anything changes, if the reference is unreachable.  Returns a future of
+        the run time from which the reference (with its plan) is in force (:mod:`twin.runs.replanning`).
         """
         with self._lock:
             t_now = self.j * self.t_s
             T_now = float(self._ctl.model.c_m @ self.estimator.state.theta)
             ref_fn = self._make_reference(spec, T_now, t_start=t_now)
-            self._reference_spec = spec
-            self._set_ref_fn(ref_fn)
-            self._start_replan(self._oscillation, f"reference changed at t = {t_now:.1f} s")
+            self._wanted_reference = (spec, ref_fn)
+            return self._request("reference", f"reference change requested at t = {t_now:.1f} s")
 
-    def set_oscillation(self, spec: OscillationSpec) -> None:
-        """Switch the specimen motion now; model, plan and gains follow after re-planning."""
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
+        """Switch the specimen motion; the motion, model, plan and gains switch together once re-planned.
+        Returns a future of the run time from which it is in force."""
         with self._lock:
             t_now = self.j * self.t_s
-            self._oscillation = spec
-            self.furnace.set_oscillation(spec, t_now)
-            self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s")
+            self._wanted_oscillation = spec
+            return self._request("oscillation", f"oscillation {'on' if spec.enabled else 'off'} requested at "
+                                                f"t = {t_now:.1f} s")
 
-    def _start_replan(self, spec: OscillationSpec, description: str) -> None:
+    def _request(self, kind: str, description: str) -> Future[float]:
+        """Re-plan for the wanted reference and oscillation from the current estimate (coalesced)."""
         theta = self.estimator.state.theta.copy()
         t0 = self.j * self.t_s
-        ref_fn, previous = self._ref_fn, self._ctl.plan
+        spec = self._wanted_oscillation or self._oscillation
+        wanted_ref = self._wanted_reference
+        ref_fn = wanted_ref[1] if wanted_ref is not None else self._ref_fn
+        previous = self._ctl.plan
         self._events.append(description)
-        if self._executor is None:
-            self._install(self._plan(spec, theta, t0, ref_fn, previous), description)
-        else:
-            fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous)
-            self._pending = _Pending(fut, description)
+
+        def job(budget: PlanBudget) -> _Plan:
+            return self._plan(spec, theta, t0, ref_fn, previous, budget=budget)
+
+        def install(ctl: _Plan, kinds: list[str]) -> float:
+            t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
+            if wanted_ref is not None and wanted_ref is self._wanted_reference:
+                ref = wanted_ref[1]
+                if t > t0 + 1e-9:
+                    # planned from t0, in force from t (the furnace went on meanwhile): the new reference
+                    # and its plan start at t, so a points reference's times count from the change in force
+                    ref = self._make_reference(wanted_ref[0], float(np.asarray(ref(t0))), t_start=t)
+                    ctl = dataclasses.replace(ctl, plan=ctl.plan.shifted(t - t0))
+                self._reference_spec = wanted_ref[0]
+                self._set_ref_fn(ref)
+                self._wanted_reference = None
+            if spec is self._wanted_oscillation:
+                self._wanted_oscillation = None
+            if spec != self._oscillation:
+                self._oscillation = spec
+                self.furnace.set_oscillation(spec, t)
+            said = {"reference": f"reference changed at t = {t:.1f} s",
+                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s"}
+            self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
+            return t
+
+        def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
+            self._wanted_reference, self._wanted_oscillation = None, None
+            self._events.append(f"re-planning failed ({' and '.join(kinds)} not applied): {exc}")
+
+        future = self._replanner.request(kind, job, install, fail)
+        if future.done() and future.exception() is not None:  # inline (no background): raise as before
+            raise future.exception()  # type: ignore[misc]
+        return future
 
     def _install(self, ctl: _Plan, description: str) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over."""
@@ -240,17 +283,6 @@ class ClosedLoop:
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         self.estimator.set_model(ctl.model)
         self._events.append(f"re-planned ({description}): {ctl.plan.status}")
-
-    def _poll_pending(self) -> None:
-        p = self._pending
-        if p is None or not p.future.done():
-            return
-        self._pending = None
-        try:
-            self._install(p.future.result(), p.description)
-        except Exception as exc:  # a failed re-plan keeps the old plan running
-            log.exception("re-planning failed: %s", p.description)
-            self._events.append(f"re-planning failed ({p.description}): {exc}")
 
     # ------------------------------------------------------------------ the loop
     @property
@@ -265,8 +297,7 @@ class ClosedLoop:
     @property
     def replanning(self) -> bool:
         """A re-plan is being solved in the background (it is swapped in at the next sample when done)."""
-        p = self._pending
-        return p is not None and not p.future.done()
+        return self._replanner.solving
 
     def step(self) -> Snapshot:
         """Advance one sample; return the snapshot of sample j (before the furnace moves on)."""
@@ -275,7 +306,7 @@ class ClosedLoop:
         # a real-time furnace waits here for its sample: outside the lock, so readers are not held up
         readings = self.furnace.read(self.j * self.t_s)
         with self._lock:
-            self._poll_pending()
+            self._replanner.poll()
             j, t = self.j, self.j * self.t_s
             self._note_lateness(readings, t)
             self._events.extend(self.furnace.drain_events())
@@ -301,6 +332,10 @@ class ClosedLoop:
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
             )
+            problem = self._guard.check(snap)
+            if problem is not None:  # nothing of this sample reaches the furnace or the record
+                self.furnace.apply(np.zeros_like(snap.u), t)
+                raise EstimateDiverged(f"t = {t:.1f} s: {problem}; the lamps were switched off")
             self.record.append(snap)
 
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
@@ -330,8 +365,7 @@ class ClosedLoop:
             yield self.step()
 
     def close(self) -> None:
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, cancel_futures=True)
+        self._replanner.close()
         self.furnace.close()
 
     # ------------------------------------------------------------------ results
