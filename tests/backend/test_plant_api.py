@@ -29,7 +29,7 @@ def opcua(endpoint: str, **extra) -> dict:
 @pytest.fixture(scope="module")
 def real_factory_client(tmp_path_factory, small_cfg):
     settings = Settings(data_dir=tmp_path_factory.mktemp("plant"), opcua=OpcUaOptions(connect_timeout_s=3.0))
-    with TestClient(create_app(settings, small_cfg)) as c:
+    with TestClient(create_app(settings, small_cfg), base_url="http://127.0.0.1") as c:
         yield c
 
 
@@ -58,7 +58,7 @@ def test_opcua_runs_are_real_time_only(real_factory_client) -> None:
 def test_the_allow_list_comes_from_the_environment(tmp_path, small_cfg, monkeypatch) -> None:
     monkeypatch.setenv("FURNACE_TWIN_OPCUA_ENDPOINTS", "10.1.2.0/24:4840")
     monkeypatch.setenv("FURNACE_TWIN_OPCUA_CONNECT_TIMEOUT_S", "1.0")
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg)) as c:
+    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg), base_url="http://127.0.0.1") as c:
         refused = c.post("/api/runs", json=opcua("opc.tcp://127.0.0.1:4840/furnace-twin/"))
         assert refused.status_code == 422 and "10.1.2.0/24:4840" in refused.json()["detail"]  # loopback no longer
         allowed = c.post("/api/runs", json=opcua("opc.tcp://10.1.2.3:4840/furnace-twin/"))
@@ -68,7 +68,8 @@ def test_the_allow_list_comes_from_the_environment(tmp_path, small_cfg, monkeypa
 
 
 def test_one_run_per_furnace(tmp_path, small_cfg) -> None:
-    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=fake_factory())) as c:
+    with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=fake_factory()),
+                    base_url="http://127.0.0.1") as c:
         first = c.post("/api/runs", json=opcua("opc.tcp://127.0.0.1:4840/furnace-twin/"))
         assert first.status_code == 201, first.text
         second = c.post("/api/runs", json=opcua("opc.tcp://127.0.0.1:4840/furnace-twin/"))

@@ -64,7 +64,7 @@ def wait_running_for(c: TestClient, run_id: str, t: float, timeout: float) -> di
 def app(tmp_path, **opcua) -> TestClient:
     settings = Settings(data_dir=tmp_path / "data", flush_interval_s=0.5,
                         opcua=OpcUaOptions(**{"reconnect_s": 2.0, "connect_timeout_s": 10.0, **opcua}))
-    return TestClient(create_app(settings, CFG))
+    return TestClient(create_app(settings, CFG), base_url="http://127.0.0.1")
 
 
 def test_closed_loop_over_opcua_tracks_like_in_process(tmp_path, small_radiation) -> None:
