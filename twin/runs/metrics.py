@@ -10,8 +10,9 @@ and the fillet mean the area integral over the fillet, both from
 :class:`twin.physics.fillet.Fillet` on the stored field grid, so that :func:`compute_metrics`
 applied to a saved ``timeseries.npz`` (:mod:`twin.runs.record`) gives exactly the published
 ``metrics.json``.  A run without a true field (a real furnace) reports NaN (JSON null) for the
-``true_*`` and field-estimation metrics.  ``late_samples`` counts the samples with a reading that did
-not come in time (a real-time furnace; ``tc_status`` code 2), 0 for a simulation.
+``true_*`` and field-estimation metrics.  :func:`late_samples` counts the samples with a reading that did
+not come in time (a real-time furnace; ``tc_status`` code 2), 0 for a simulation; a run's metrics
+(:meth:`twin.runs.record.RunRecord.metrics`) carry it beside the error metrics.
 
 Example
 -------
@@ -112,8 +113,12 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
         "true_inhomogeneity_steady": _mean(sup_true, stf),
         "true_mean_error_steady_max": _max(true_mean_err, stf),
         "field_estimation_error_steady_max": _max(est_err, stf),
-        "late_samples": late_samples(ts),
     }
+
+
+def run_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
+    """What a run reports: :func:`compute_metrics` and ``late_samples`` (as a float, like the others)."""
+    return {**compute_metrics(ts), "late_samples": float(late_samples(ts))}
 
 
 def late_samples(ts: Mapping[str, Any]) -> int:
