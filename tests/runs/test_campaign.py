@@ -7,7 +7,7 @@ import pytest
 
 from twin.config import load_config, small_config
 from twin.runs.campaign import PAPER, TC4_POSITIONS, campaign_scenarios, campaign_table, run_campaign
-from twin.runs.metrics import METRIC_KEYS, compute_metrics
+from twin.runs.metrics import METRIC_KEYS, run_metrics
 
 
 def test_scenarios_are_the_papers_six():
@@ -38,7 +38,7 @@ def test_short_campaign_writes_everything(tmp_path, small_radiation):
             ts = dict(npz)
         assert ts["t"][-1] == 20.0
         # the reported figures are those of the stored run (recomputed from its time series)
-        again = compute_metrics(ts)
+        again = run_metrics(ts)  # the error metrics and late_samples
         for k, v in saved.items():
             assert again[k] == pytest.approx(v, rel=1e-12, abs=1e-15), (e["name"], k)
         # the oscillating runs move by 3 L_h sin(2 pi t / (0.15 t_E)); sampled at 0.1 s (1/15 of the
