@@ -4,8 +4,12 @@ Keys of the contract: ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K, fill
 estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``, ``tc_hat``
 (the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
 of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
-(unix s when the sample was computed, for latency), ``status``, ``events`` and ``late_samples`` (samples
-of a real-time furnace whose readings did not all come in time, so far).
+(unix s when the sample was computed, for latency), ``status``, ``events`` (texts of the run's
+events since the previous frame), ``late_samples`` (samples of a real-time furnace whose readings did
+not all come in time, so far), and from the server (``backend.run_manager``): ``event_log``
+(those events as ``{n, t, text, level}``, ``n`` their index in the run's event list, so a page
+that also read ``GET /api/runs/{id}/series`` shows each one once), ``spread`` (max over the fillet
+|T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).
 """
 
 from __future__ import annotations
@@ -93,8 +97,16 @@ def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     }
 
 
+def frame_extra(s: SnapshotLike, fillet: Any) -> dict[str, Any]:
+    """What the server adds to a frame: ``spread`` (max over the fillet |T_hat - fillet mean|, K, with a
+    ``twin.physics.fillet.Fillet``) and ``saturated`` (+1 full power, -1 off, 0 between, per group)."""
+    from twin.control.saturation import bound_flags
+
+    return {"spread": finite_or_none(fillet.spread(s.field_hat)), "saturated": bound_flags(s.u).tolist()}
+
+
 def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
-               events: list[str] | None = None) -> dict[str, Any]:
+               events: list[str] | None = None, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample
     since the previous frame, so none is lost when samples are not streamed one by one)."""
     field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
@@ -108,14 +120,16 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
         field=[[finite_or_none(v) for v in row] for row in field],
         events=events_of(s.events) if events is None else list(events),
     )
+    if extra:
+        frame.update(extra)
     return frame
 
 
 def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
-               events: list[str] | None = None) -> str:
+               events: list[str] | None = None, extra: dict[str, Any] | None = None) -> str:
     """The frame as JSON text, serialised once and sent to every client."""
-    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events),
-                      allow_nan=False, separators=(",", ":"))
+    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events,
+                                 extra=extra), allow_nan=False, separators=(",", ":"))
 
 
 def json_safe(obj: Any) -> Any:

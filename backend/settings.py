@@ -71,6 +71,11 @@ class Settings(BaseSettings):
     change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")
     opcua: OpcUaOptions = Field(default_factory=OpcUaOptions,
                                 description="furnaces over OPC UA (environment FURNACE_TWIN_OPCUA_*)")
+    study_workers: int | None = Field(None, ge=1, le=256,
+                                      description="LocalCluster process workers of a study (default: one per core)")
+    study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "
+                                        "e.g. tcp://127.0.0.1:8786")
+    max_study_cases: int = Field(5000, ge=1, le=100_000, description="largest study accepted (cases)")
 
     @field_validator("api_token")
     @classmethod
@@ -93,3 +98,7 @@ class Settings(BaseSettings):
     @property
     def runs_dir(self) -> Path:
         return self.data_dir / "runs"
+
+    @property
+    def studies_dir(self) -> Path:
+        return self.data_dir / "studies"

@@ -41,16 +41,19 @@ def check_endpoint(endpoint: str, options: OpcUaOptions) -> None:
                                  f"(FURNACE_TWIN_OPCUA_ENDPOINTS = {options.endpoints})")
 
 
-def open_furnace(cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *, opcua: OpcUaOptions | None = None,
-                 data_dir: str | Path = DEFAULT_DATA_DIR) -> Furnace:
+def open_furnace(cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *, truth_radiation: Any = None,
+                 opcua: OpcUaOptions | None = None, data_dir: str | Path = DEFAULT_DATA_DIR) -> Furnace:
     """The scenario's furnace; an OPC UA one connected, with the scenario's TC4 and drive settings commanded.
+
+    A simulated furnace has the scenario's truth (``truth_radiation``: its own table, read from the cache
+    if not given and needed); a furnace over OPC UA has none, whatever the scenario's ``truth`` says.
 
     Raises :class:`EndpointNotAllowed`, or ``FurnaceUnavailable`` (with a message) if it cannot be used."""
     plant = scenario.plant
     if plant.kind == "simulated":
         from twin.furnace.simulated import SimulatedFurnace
 
-        return SimulatedFurnace.for_scenario(cfg, scenario, radiation)
+        return SimulatedFurnace.for_scenario(cfg, scenario, radiation, truth_radiation=truth_radiation)
     from twin.furnace.opcua.furnace import OpcUaFurnace
 
     options = opcua or OpcUaOptions()

@@ -1,7 +1,7 @@
 """``furnace-twin emulate``: the simulated furnace served in real time over OPC UA (hardware in the loop).
 
 The furnace is ``SimulatedFurnace.for_scenario`` of the furnace config and the furnace-side fields of an
-optional scenario file (mismatch, TC4, TC noise, seed, the initial drive settings, and whatever else the
+optional scenario file (its truth, mismatch, TC4, TC noise, seed, the initial drive settings, and whatever else the
 simulated furnace takes from a scenario).  Without ``--security sign-encrypt`` the server listens only on
 a loopback address unless ``--allow-insecure`` says otherwise.  Ctrl-C (or SIGTERM) stops it;
 ``--stats FILE`` then writes the timing figures (:mod:`twin.furnace.emulator.timing`) as JSON.
