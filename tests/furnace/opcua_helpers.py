@@ -28,6 +28,10 @@ rays_per_lamp = 8000
 rays_per_wall = 4000
 [oscillation]
 positions = 5
+[truth.radiation]
+rays_per_specimen_cell = 800
+rays_per_lamp = 16000
+rays_per_wall = 8000
 """
 
 
