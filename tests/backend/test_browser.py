@@ -293,10 +293,16 @@ def test_dashboard_starts_an_opcua_run_only_where_allowed(server, browser, artif
     assert page.is_visible("input[name=endpoint]")
     for hidden in ("speed", "tc_noise", "seed", "m_eps"):
         assert not page.is_visible(f"input[name={hidden}]"), hidden
+    # a furnace over OPC UA has no truth (issue 10's choice applies to the simulation only)
+    assert not page.is_visible("select[name=truth]") and not page.is_visible("details.more")
+    body = _js(page, "import('/assets/forms.js').then((m) => m.scenarioFromForm())")
+    assert body["plant"]["kind"] == "opcua" and not {"truth", "speed", "seed", "tc_noise", "mismatch"} & set(body)
     page.fill("input[name=endpoint]", "opc.tcp://10.9.9.9:4840/furnace-twin/")
     page.click("#start-btn")
     _wait_text(page, "#start-msg", "FURNACE_TWIN_OPCUA_ENDPOINTS")
-    assert "422" in _text(page, "#start-msg")
+    assert _js(page, "document.getElementById('start-msg').className") == "msg err"  # the 422's sentence
+    # the feasibility preview (POST /api/feasibility) refuses the same endpoint before any start
+    _wait_text(page, "#feasibility", "FURNACE_TWIN_OPCUA_ENDPOINTS")
     with socket.socket() as s:  # bound, not listening: nothing answers there
         s.bind(("127.0.0.1", 0))
         page.fill("input[name=endpoint]", f"opc.tcp://127.0.0.1:{s.getsockname()[1]}/furnace-twin/")
@@ -306,6 +312,7 @@ def test_dashboard_starts_an_opcua_run_only_where_allowed(server, browser, artif
     assert len(httpx.get(f"{server.url}/api/runs", timeout=10).json()) == n_runs  # nothing was started
     page.check("input[name=plant][value=simulated]")
     assert page.is_visible("input[name=speed]") and not page.is_visible("input[name=endpoint]")
+    assert page.is_visible("select[name=truth]") and page.is_visible("details.more")
     assert not errors, errors
     page.close()
 

@@ -121,8 +121,11 @@ def test_emulator_killed_mid_run_ends_plant_lost_with_its_data(tmp_path) -> None
         assert (npz["tc_status"][-5:] == 2).all()  # its last samples: nothing came
         assert c.get(f"/api/runs/{run_id}/metrics").status_code == 200
         assert c.get(f"/api/runs/{run_id}/recording").status_code == 200
-        events = [str(e) for e in npz["event_text"]]
-        assert any("link to the furnace lost" in e for e in events), events
+        events = dict(zip((str(e) for e in npz["event_text"]), (str(v) for v in npz["event_level"]), strict=True))
+        lost = [e for e in events if "link to the furnace lost" in e]
+        assert lost and events[lost[0]] == "warn", events  # the loop's report of the lost link: a warning
+        end = [e for e in events if e.startswith("run lost its furnace")]
+        assert end and events[end[0]] == "error", events  # the end of the run: an error, as a failed run's
 
 
 def test_twin_killed_mid_run_the_emulator_turns_the_lamps_off(tmp_path) -> None:
