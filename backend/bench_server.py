@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = FurnaceConfig.model_validate_json(Path(args.config_json).read_text())
     settings = Settings(data_dir=Path(args.data_dir), port=args.port, viser_port=0, rerun_web_port=0,  # type: ignore[call-arg]
                         max_concurrent_runs=args.max_runs)
-    app = create_app(settings, cfg, loop_factory=DefaultLoopFactory())
+    app = create_app(settings, cfg, loop_factory=DefaultLoopFactory(settings))
     uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=args.port, log_level="warning")).run()
     return 0
 

@@ -1,5 +1,6 @@
 """The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (the
-twin's and the simulated furnace's own, each loaded once per furnace).
+twin's and the simulated furnace's own, each loaded once per furnace), on the scenario's furnace (simulated,
+or over OPC UA with the server's ``opcua`` settings).
 
 The radiation models (exchange factors, ray-traced once per furnace and cached on disk) are loaded in a
 background thread as soon as the server starts (:meth:`DefaultLoopFactory.start_warm_up`): the twin's, then
@@ -17,6 +18,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 from backend.run_worker import LoopLike
+from backend.settings import Settings
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import OscillationSpec, Reference, Scenario
@@ -54,11 +56,14 @@ MAX_SPEED_NICENESS = 5
 
 
 class DefaultLoopFactory:
-    """Builds the server's runs: each ``twin.runs.loop.ClosedLoop`` in its own process
+    """Builds the server's runs: a simulated furnace's ``twin.runs.loop.ClosedLoop`` in its own process
     (:class:`backend.process_loop.ProcessLoop`, which reads the radiation models from the disk cache), or in
-    the server's process with ``processes=False`` (sharing the radiation models loaded here)."""
+    the server's process with ``processes=False`` (sharing the radiation models loaded here); a run on a
+    furnace over OPC UA (:func:`twin.furnace.connect.open_furnace`, ``settings.opcua``; real time, paced by
+    the furnace) always in the server's process."""
 
-    def __init__(self, *, processes: bool = True) -> None:
+    def __init__(self, settings: Settings | None = None, *, processes: bool = True) -> None:
+        self.settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
         self.processes = processes
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
@@ -238,18 +243,33 @@ class DefaultLoopFactory:
         ref = reference_trajectory(scenario.reference, T0)
         plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
 
+    def check_plant(self, cfg: FurnaceConfig, scenario: Scenario) -> None:
+        """Raise (``ValueError`` / ``OSError`` with a message) if the scenario's furnace cannot be used; for a
+        furnace over OPC UA this connects and finds its nodes, writing nothing (blocking: call it in a thread)."""
+        from twin.furnace.connect import probe_furnace
+
+        probe_furnace(cfg, scenario, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
+
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
+        from twin.furnace.connect import open_furnace
+        from twin.runs.loop import ClosedLoop
+
         rad = self.radiation(cfg, budget)
-        own = self.truth_radiation(cfg, budget) if scenario.truth == "independent" else None
-        if self.processes:  # the child loads both tables from the disk cache, where they now are
+        simulated_truth = scenario.plant.kind == "simulated" and scenario.truth == "independent"
+        own = self.truth_radiation(cfg, budget) if simulated_truth else None  # a furnace over OPC UA has no truth
+        if self.processes and scenario.plant.kind == "simulated":
+            # the child loads both tables from the disk cache, where they now are
             from backend.process_loop import ProcessLoop
 
             return ProcessLoop(cfg, scenario, budget=budget,
                                niceness=MAX_SPEED_NICENESS if scenario.speed == "max" else 0)
-        from twin.furnace.simulated import SimulatedFurnace
-        from twin.runs.loop import ClosedLoop
-
-        # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True, budget=budget)
+        furnace = open_furnace(cfg, scenario, rad, truth_radiation=own, opcua=self.settings.opcua,
+                               data_dir=self.settings.data_dir)
+        try:
+            # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
+            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True,
+                                        budget=budget)
+        except BaseException:
+            furnace.close()
+            raise
         return loop

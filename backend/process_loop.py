@@ -230,6 +230,11 @@ class ProcessLoop:
         return self._done
 
     @property
+    def paced_by_furnace(self) -> bool:
+        """A simulated furnace has no clock of its own: the run worker paces the run by its speed."""
+        return False
+
+    @property
     def replanning(self) -> bool:
         """A re-plan is being solved in the child (at speed max the run worker waits for it); asks the child
         only while the last answer (of a step or a change) said so."""

@@ -59,7 +59,7 @@ def serve(
         log.error("refusing to listen on %s without an API token: set FURNACE_TWIN_API_TOKEN "
                   "(or keep the default 127.0.0.1)", host)
         return 2
-    factory = DefaultLoopFactory()
+    factory = DefaultLoopFactory(settings)
     app = create_app(settings, cfg, loop_factory=factory, viser=True, rerun=True,
                      furnace_name=furnace_name(cfg, furnace) if furnace else None)
     log.info("dashboard on http://%s:%d/ , data in %s", host, port, settings.data_dir.resolve())

@@ -2,7 +2,10 @@
 
 Every field can be set from the environment, e.g. ``FURNACE_TWIN_API_TOKEN=secret`` or
 ``FURNACE_TWIN_MAX_CONCURRENT_RUNS=3``; ``furnace-twin serve`` passes host, ports and the
-data directory explicitly.  The defaults bind to loopback only.
+data directory explicitly.  The defaults bind to loopback only.  Runs on a furnace over OPC UA take
+their link settings from ``FURNACE_TWIN_OPCUA_*`` (:class:`twin.furnace.opcua.options.OpcUaOptions`:
+allowed endpoints, security, credentials, mapping file, reconnection); their certificates live in
+``<data_dir>/opcua``.
 """
 
 from __future__ import annotations
@@ -12,6 +15,8 @@ from pathlib import Path
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from twin.furnace.opcua.options import OpcUaOptions
 
 DEFAULT_DATA_DIR = Path("furnace-data")
 #: shortest API token accepted (characters): 16 random characters are beyond guessing over HTTP
@@ -71,6 +76,8 @@ class Settings(BaseSettings):
     rerun_grpc_port: int = Field(9877, ge=1, le=65535, description="the rerun web viewer's gRPC proxy (loopback)")
     rerun_server_memory_limit: str = Field("512MiB", description="what the rerun proxy buffers for late viewers")
     rerun_memory_limit: str = Field("2GiB", description="what the rerun viewer keeps; the oldest data goes first")
+    opcua: OpcUaOptions = Field(default_factory=OpcUaOptions,
+                                description="furnaces over OPC UA (environment FURNACE_TWIN_OPCUA_*)")
     study_workers: int | None = Field(None, ge=1, le=256,
                                       description="LocalCluster process workers of a study (default: one per core)")
     study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "

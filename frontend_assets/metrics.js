@@ -30,7 +30,10 @@ export function metricsTable(run) {
   const m = run.metrics;
   if (!m) return `<div class="note">metrics when the run ends · ${esc(windowNote(run))}</div>`;
   const scale = scaleOf(run);
-  const rows = keys().filter((k) => k in m).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
+  // a furnace over OPC UA has no truth: no rows for the true_* and field-estimation metrics (always null)
+  const noTruth = run.scenario.plant && run.scenario.plant.kind === "opcua";
+  const shown = (k) => k in m && !(noTruth && (k.startsWith("true_") || k.startsWith("field_estimation")));
+  const rows = keys().filter(shown).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
     + `<td class="num">${kelvin(m[k], scale)}</td><td class="num">${percent(m[k])}</td></tr>`).join("");
   return `<div class="note">${esc(windowNote(run))}</div><table><thead><tr><th>metric</th><th class="num">K</th>`
     + `<th class="num">% of setpoint</th></tr></thead><tbody>${rows}</tbody></table>`;

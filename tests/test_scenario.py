@@ -21,6 +21,7 @@ def test_defaults_are_the_product_contract():
         "seed": 0,
         "faults": [],
         "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
+        "plant": {"kind": "simulated"},  # product.md, "More scenario fields"
     }
     with pytest.raises(ValidationError, match="truth"):
         Scenario.model_validate({"truth": "model"})

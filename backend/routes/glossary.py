@@ -79,6 +79,9 @@ def glossary(cfg: FurnaceConfig) -> dict[str, Any]:
         "mismatch": "plant mismatch: how much the simulated furnace deviates from the twin's model (relative, "
                     "0.05 = 5 % higher), to test robustness.",
         "speed": "speed: 'max' runs as fast as the computer can; a number is a real-time factor (2 = twice real time).",
+        "plant": "the furnace of a run: simulated in process (any speed, its noise, seed, deviations and truth), or a "
+                 "furnace over OPC UA (a real one, or furnace-twin emulate): real time on its clock, no truth, samples "
+                 "that come late counted. The server connects only to the endpoints its settings allow.",
     }
     return {"metrics": {k: {"name": n, "meaning": m} for k, (n, m) in METRIC_WORDS.items()}, "terms": terms,
             "groups": groups}

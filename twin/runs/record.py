@@ -4,7 +4,8 @@ A :class:`Snapshot` is one sample of a closed-loop run; a :class:`RunRecord` col
 growing arrays and writes them in the ``timeseries.npz`` layout:
 
 * per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
-  ``u``, ``u_ff`` (n, 6) fractions of u_max;
+  ``u``, ``u_ff`` (n, 6) fractions of u_max; ``tc_status`` (n, 4) int8, :data:`TC_STATUS_CODES` of each
+  reading (0 good, 1 bad, 2 missing: late or lost);
 * fields at ``t_field``: ``field_hat`` (m, N_y, N_x) K, and ``field_true`` only when the furnace is a
   simulation (a real furnace has no true field).  Every sample up to ``full_rate_until`` (the loop: 2 t_E,
   the end of the metrics' windows, moved by a live reference change), then every ``field_every``-th (the
@@ -42,6 +43,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -55,6 +57,8 @@ Array = NDArray[np.float64]
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
 FIELD_SERIES = ("field_hat", "field_true")
+#: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
+TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 EVENT_LEVELS = ("info", "warn", "error")
 
 
@@ -67,18 +71,6 @@ class RunEvent:
     level: str = "info"
 
 
-def loop_event_level(text: str) -> str:
-    """The level of an event the closed loop reports (its record and the server's list agree): a fault the
-    twin detected, or anything that failed, is a warning; an injected fault and the rest are information.
-
-    >>> loop_event_level("fault detected: TC2 dropout at 4.1 s"), loop_event_level("fault injected: T2h failed")
-    ('warn', 'info')
-    """
-    if text.startswith(("fault injected", "faults cleared")):
-        return "info"
-    return "warn" if text.startswith("fault detected") or "failed" in text else "info"
-
-
 @dataclass(frozen=True)
 class RunChange:
     """A live change applied during a run: from run time ``t`` (s) on, ``kind`` (``reference`` or
@@ -87,6 +79,29 @@ class RunChange:
     t: float
     kind: str
     body: dict[str, Any]
+
+
+def event_level(text: str) -> str:
+    """The level of one of the loop's own reports: ``warn`` for a failure (a re-plan that failed), a late
+    sample, a lost link to the furnace or a fault the twin detected, else ``info``.
+
+    >>> event_level("re-planning failed (reference not applied): no solution"), event_level("re-planned (x): ok")
+    ('warn', 'info')
+    >>> event_level("sample at t = 3.0 s late: no TC1 in time (the EKF predicts without them)")
+    'warn'
+    >>> event_level("link to the furnace restored after 1.2 s")
+    'info'
+
+    A fault the twin detected is a warning; a fault injected into the simulated furnace is information:
+
+    >>> event_level("fault detected: TC2 dropout at 4.1 s"), event_level("fault injected: T2h failed at t = 9.0 s")
+    ('warn', 'info')
+    """
+    if text.startswith(("fault injected", "faults cleared")):
+        return "info"
+    if text.startswith("fault detected"):
+        return "warn"
+    return "warn" if re.search(r"failed| late:|\blost\b", text) else "info"
 
 
 def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:
@@ -146,6 +161,8 @@ class Snapshot:
     true_mean: float | None
     true_inhomogeneity: float | None
     events: tuple[str, ...] = ()
+    tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
+    late_samples: int = 0  # samples of the run so far with a reading that did not come in time
 
 
 @dataclass(frozen=True)
@@ -231,11 +248,12 @@ class RunRecord:
     def append(self, snap: Snapshot) -> None:
         """Add one sample (its events too)."""
         values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
+        values["tc_status"] = [TC_STATUS_CODES[st] for st in snap.tc_status] if snap.tc_status else [0] * len(snap.tc)
         if self.has_truth and snap.field_true is None:
             raise ValueError("this record keeps a true field, the snapshot has none")
         if not self._columns:
             for k, v in values.items():
-                self._columns[k] = _Column(np.shape(v), float)
+                self._columns[k] = _Column(np.shape(v), np.int8 if k == "tc_status" else float)
         for k, v in values.items():
             self._columns[k].append(v)
         self._since_field += 1
@@ -249,7 +267,7 @@ class RunRecord:
                     self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
             for k, v in fields_now.items():
                 self._fields[k].append(v)
-        self._events.extend(RunEvent(float(snap.t), str(e), loop_event_level(str(e))) for e in snap.events)
+        self._events.extend(RunEvent(float(snap.t), str(e), event_level(str(e))) for e in snap.events)
 
     def note_change(self, t: float, kind: str, body_json: str) -> None:
         """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``;
@@ -270,6 +288,8 @@ class RunRecord:
         for k in SAMPLE_SERIES:
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros(0)
+        col = self._columns.get("tc_status")
+        out["tc_status"] = col.view().copy() if col is not None else np.zeros((0, 4), np.int8)
         for k in FIELD_SERIES:
             if k == "field_true" and not self.has_truth:
                 continue
@@ -304,6 +324,7 @@ class RunRecord:
             out[k] = col.view()[start:].copy()
         for k in SAMPLE_SERIES:
             out.setdefault(k, np.zeros(0))
+        out.setdefault("tc_status", np.zeros((0, 4), np.int8))
         t0 = float(out["t"][0]) if len(out["t"]) else np.inf
         t_field = self._fields.get("t_field")
         if t_field is not None:  # the fields kept from sample ``start`` on (a subsequence of the samples)
@@ -324,10 +345,10 @@ class RunRecord:
         return out
 
     def metrics(self) -> dict[str, float]:
-        """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
-        from twin.runs.metrics import compute_metrics
+        """The run metrics of product.md and ``late_samples`` (:func:`twin.runs.metrics.run_metrics`)."""
+        from twin.runs.metrics import run_metrics
 
-        return compute_metrics(self.arrays())
+        return run_metrics(self.arrays())
 
     def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> None:
         """Write :meth:`arrays` atomically (see :func:`save_arrays`)."""
