@@ -76,11 +76,14 @@ class DetectionSettings:
     common_range: tuple[float, float] = (-0.5, 0.5)  # plausible loss of all groups' power (lamp efficiency)
     capacity_range: tuple[float, float] = (-0.5, 1.0)  # plausible heat capacity deviation (Curie peak ~ +50 %)
     readmit_s: float = 3.0  # a left-out TC reads consistently this long: used again
-    # "consistently": |mean normalised innovation| over readmit_s below this.  Not 1: a TC's own bias (the
-    # truth's class-1 tolerance, up to 3.3 K), which the estimate absorbs while it uses the TC, shows once it
-    # is left out: after a 10 s TC3 dropout its normalised innovations were 1.3-3.4, about 2 on average
-    # (small_config, seeds 0-2)
+    # "consistently": |mean normalised innovation| over readmit_s below this, after a dropout or a stuck
+    # reading.  Not 1: a TC's own bias (the truth's class-1 tolerance, up to 3.3 K), which the estimate absorbs
+    # while it uses the TC, shows once it is left out: after a 10 s TC3 dropout its normalised innovations
+    # were 1.3-3.4, about 2 on average (small_config, seeds 0-2)
     readmit_z: float = 3.0
+    # the same after an offset or a drift, whose readings were wrong: back within the estimate's own
+    # uncertainty (at 3 a TC3 offset by -5 K was used again, and the TC4 error rose from 4.0 to 4.9 K)
+    readmit_z_biased: float = 1.0
     block_s: float = 1.0  # innovation inflation (FaultDetector._track_inflation): block length
     inflation_lag_s: float = 5.0  # blocks of the last this many s are not used for it
     inflation_history_s: float = 60.0  # blocks used, before the lag
@@ -275,8 +278,9 @@ class FaultDetector:
     def _readmit(self, t: float, nu: Array, S: Array) -> None:
         """A left-out TC is used again when, for ``readmit_s``, it gave a reading at every sample, never the
         same one twice in a row for ``flat_s``, and the mean of its normalised innovations (against the
-        estimate made without it) stayed below ``readmit_z``: within what its own bias and the estimate's
-        uncertainty there explain."""
+        estimate made without it) stayed below ``readmit_z`` (after a dropout or a stuck reading: within what
+        its own bias and the estimate's uncertainty explain) or ``readmit_z_biased`` (after an offset or a
+        drift: within the estimate's uncertainty)."""
         s = self.settings
         z = nu / np.sqrt(np.diag(S))
         n = self._n(s.readmit_s)
@@ -287,7 +291,8 @@ class FaultDetector:
                 continue
             recent.append(float(z[i]))
             del recent[:-n]
-            if len(recent) == n and abs(float(np.mean(recent))) < s.readmit_z:
+            limit = s.readmit_z_biased if self.reasons[i] in ("offset", "drift") else s.readmit_z
+            if len(recent) == n and abs(float(np.mean(recent))) < limit:
                 self.excluded[i] = False
                 self._reported[i] = ""
                 self.banks.reset()
