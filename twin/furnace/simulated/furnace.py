@@ -171,8 +171,10 @@ class SimulatedFurnace:
 
     # ---- fault injection (twin.furnace.interface.FaultInjectable)
     def set_faults(self, faults: Sequence[FaultSpec], t: float) -> None:
-        """Replace the injected faults from run time t on (their ``at`` counted from t; empty clears them)."""
+        """Replace the injected faults from run time t on (their ``at`` counted from t; empty clears them); a
+        reading of the current sample taken before is read again with them."""
         self.faults.schedule(faults, t)
+        self._last_read = None
 
     def faults_in_force(self) -> list[FaultSpec]:
         return self.faults.in_force()
