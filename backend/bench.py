@@ -233,6 +233,8 @@ def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float) -> di
             t = rows[0][-1][2] if rows[0] else 0.0
             samples.append((t, _memory_mb(srv.proc.pid)))
             await asyncio.sleep(0.5)
+        # and at the end (a short run on a quiet machine can end between two samples of the loop above)
+        samples.append((rows[0][-1][2] if rows[0] else long_sim_s, _memory_mb(srv.proc.pid)))
 
     asyncio.run(watch())
     body = srv.wait_status(run_id, {"finished", "stopped", "error", "interrupted"})
