@@ -92,6 +92,28 @@ class Mismatch(_Model):
     lamp_efficiency: float = Field(0.0, ge=-0.5, le=0.5)
 
 
+class EstimatorChoice(_Model):
+    """How the twin estimates (issue 11): the model's motion and whether it calibrates parameters.
+
+    ``motion="averaged", calibrate=False`` is the paper's EKF (section 3.2, eq. 11); the defaults are
+    the best measured configuration (README, campaign).
+    """
+
+    motion: Literal["averaged", "position_aware"] = Field(
+        "position_aware", description="'averaged' (paper, eq. 11) or 'position_aware' (model at eta(t_j))")
+    calibrate: bool = Field(True, description="learn lamp efficiency and emissivity online (joint EKF)")
+
+
+#: The paper's estimator, one setting away from the default.
+PAPER_ESTIMATOR = EstimatorChoice(motion="averaged", calibrate=False)
+
+
+class EstimatorSpec(EstimatorChoice):
+    """The run's estimator and, optionally, a shadow estimator on the same TC data (shown beside it)."""
+
+    shadow: EstimatorChoice | None = Field(None, description="a second estimator to compare, or null")
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: float = Field(240.0, gt=0.0, le=MAX_DURATION_S, description="s")
@@ -101,6 +123,7 @@ class Scenario(_Model):
     mismatch: Mismatch = Field(default_factory=Mismatch)
     tc_noise: float = Field(1.0, ge=0.0, le=50.0, description="TC noise standard deviation, K")
     seed: int = Field(0, ge=0, le=2**31 - 1)
+    estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
 
     @field_validator("tc4")
     @classmethod

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import Furnace, Readings
+from twin.model.tables import PARAMETERS, Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
 from twin.runs.record import RunHeader, RunRecord, Snapshot
@@ -67,6 +68,8 @@ class _Plan:
     model: Any
     plan: Any
     gains: Any
+    oscillation: OscillationSpec
+    parameters: Parameters  # the calibrated deviations the controller's model was built with
 
 
 @dataclass
@@ -100,7 +103,8 @@ class ClosedLoop:
         plan_cache: dict[Any, _Plan] | None = None,
     ) -> None:
         from twin.control.lqg import Controller
-        from twin.estimation.ekf import Estimator
+        from twin.estimation.choice import build_estimator
+        from twin.model.tables import model_tables
         from twin.radiation import radiation_model
 
         self.cfg = cfg
@@ -113,6 +117,7 @@ class ClosedLoop:
 
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
         self.furnace: Furnace = furnace
+        self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
         self._executor = ThreadPoolExecutor(max_workers=1) if background else None
         self._pending: _Pending | None = None
@@ -132,11 +137,15 @@ class ClosedLoop:
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters())
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
-        self.estimator = Estimator(self._ctl.model, cfg, theta0)
+        spec = scenario.estimator
+        self.estimator = build_estimator(spec, self.tables, scenario.oscillation, cfg, theta0)
+        self.shadow = None if spec.shadow is None else build_estimator(
+            spec.shadow, self.tables, scenario.oscillation, cfg, theta0)
+        self._replan_threshold = cfg.calibration.replan_threshold
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -165,7 +174,7 @@ class ClosedLoop:
         from twin.control.reference import reachable_range
         from twin.model.discrete import discrete_model
 
-        return reachable_range(discrete_model(self.cfg, self.radiation, None), self.cfg)
+        return reachable_range(discrete_model(self.cfg, self.radiation, None, tables=self.tables), self.cfg)
 
     def _make_reference(self, spec: Reference, T_initial: float, t_start: float) -> Callable[[Any], Any]:
         """T_ref(t) of run time; raises ValueError (ReferenceError) for unreachable temperatures."""
@@ -173,20 +182,21 @@ class ClosedLoop:
 
         return reference_trajectory(spec, T_initial, t_start=t_start, T_range=self._T_range)
 
-    def _plan(
-        self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any
-    ) -> _Plan:
-        """Model, feedforward and gains for the rest of the run from t0 (eqs. 11, 18-29)."""
+    def _plan(self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
+              parameters: Parameters) -> _Plan:
+        """Model (averaged over the motion, eq. 11, with the calibrated parameters), feedforward and gains
+        for the rest of the run from t0 (eqs. 18-29)."""
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
-        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
+        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
+                               parameters=parameters)
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Plan(model, plan, gains)
+        return _Plan(model, plan, gains, spec, parameters)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> None:
@@ -213,20 +223,34 @@ class ClosedLoop:
     def _start_replan(self, spec: OscillationSpec, description: str) -> None:
         theta = self.estimator.state.theta.copy()
         t0 = self.j * self.t_s
-        ref_fn, previous = self._ref_fn, self._ctl.plan
+        ref_fn, previous, params = self._ref_fn, self._ctl.plan, self.estimator.parameters
         self._events.append(description)
         if self._executor is None:
-            self._install(self._plan(spec, theta, t0, ref_fn, previous), description)
+            self._install(self._plan(spec, theta, t0, ref_fn, previous, params), description)
         else:
-            fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous)
+            fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous, params)
             self._pending = _Pending(fut, description)
 
     def _install(self, ctl: _Plan, description: str) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over."""
+        motion_changed = ctl.oscillation != self._ctl.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
-        self.estimator.set_model(ctl.model)
+        if motion_changed:  # the averaged estimators switch to the new period average with the controller
+            for est in (self.estimator, self.shadow):
+                if est is not None:
+                    est.set_model(est.model.with_oscillation(ctl.oscillation if ctl.oscillation.enabled else None))
         self._events.append(f"re-planned ({description}): {ctl.plan.status}")
+
+    def _follow_calibration(self, t: float) -> None:
+        """Re-plan the controller when a calibrated parameter moved past the threshold since its plan."""
+        if not self.estimator.k or self._pending is not None:
+            return
+        p, planned = self.estimator.parameters.as_array(), self._ctl.parameters.as_array()
+        if float(np.max(np.abs(p - planned))) <= self._replan_threshold:
+            return
+        now = ", ".join(f"{k} {100 * v['value']:+.1f} %" for k, v in self.estimator.calibration().items())
+        self._start_replan(self._oscillation, f"calibration at t = {t:.1f} s: {now}")
 
     def _poll_pending(self) -> None:
         p = self._pending
@@ -261,8 +285,10 @@ class ClosedLoop:
             self._readings = None
             eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
-            state = self.estimator.update(readings.for_estimator())  # eq. 13 (faulty readings gated inside)
+            y = readings.for_estimator()
+            state = self.estimator.update(y)  # eq. 13 (faulty readings gated inside)
             theta = state.theta
+            self._follow_calibration(t)
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
@@ -270,6 +296,7 @@ class ClosedLoop:
 
             field_hat = ctl.model.fe.field_on_cells(theta)  # the cells are self.x, self.y
             truth = self.furnace.true_field()
+            shadow = None if self.shadow is None else self.shadow.update(y).theta
             events, self._events = tuple(self._events), []
             snap = Snapshot(
                 j=j, t=t, eta=eta, T_ref=T_ref, T_mean_hat=float(ctl.model.c_m @ theta),
@@ -279,17 +306,35 @@ class ClosedLoop:
                 inhomogeneity=float(self.fillet.sup(field_hat, T_ref)),
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
-                events=events,
+                events=events, **self._estimator_outputs(shadow),
             )
             self.record.append(snap)
 
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimator.predict(snap.u)
+            self.estimator.predict(snap.u, eta)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
+            if self.shadow is not None:
+                self.shadow.predict(snap.u, eta)
             self.j += 1
             return snap
+
+    def _estimator_outputs(self, shadow: Array | None) -> dict[str, Any]:
+        """The snapshot fields of a calibrating estimator and of a shadow estimator (record.OPTIONAL_SERIES)."""
+        out: dict[str, Any] = {}
+        est = self.estimator
+        if est.k:
+            values, sigma = np.full(len(PARAMETERS), np.nan), np.full(len(PARAMETERS), np.nan)
+            for i, (name, v) in enumerate(est.calibration().items()):
+                values[PARAMETERS.index(name)], sigma[PARAMETERS.index(name)] = v["value"], v["sigma"]
+                assert name == est.model.calibrated[i]
+            out.update(parameters=values, parameter_sigma=sigma)
+        if shadow is not None:
+            fe = self._ctl.model.fe
+            out.update(shadow_T_mean_hat=float(fe.c_m @ shadow), shadow_tc_hat=self._phi_tc @ shadow,
+                       shadow_field_hat=fe.field_on_cells(shadow))
+        return out
 
     def run(self) -> Iterator[Snapshot]:
         while not self.done:

@@ -7,6 +7,9 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   ``u``, ``u_ff`` (n, 6) fractions of u_max;
 * fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
   only when the furnace is a simulation (a real furnace has no true field);
+* with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
+  efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
+  ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
 * events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
@@ -43,7 +46,10 @@ Array = NDArray[np.float64]
 
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
-FIELD_SERIES = ("field_hat", "field_true")
+FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
+#: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
+#: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
+OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,11 @@ class Snapshot:
     true_mean: float | None
     true_inhomogeneity: float | None
     events: tuple[str, ...] = ()
+    parameters: Array | None = None  # (3,) calibrated deviations (lamp efficiency, emissivity, convection)
+    parameter_sigma: Array | None = None  # (3,) their standard deviations
+    shadow_T_mean_hat: float | None = None  # the shadow estimator's fillet mean, TCs and field
+    shadow_tc_hat: Array | None = None
+    shadow_field_hat: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -140,6 +151,7 @@ class RunRecord:
         self.header = header
         self.has_truth = has_truth
         self._columns: dict[str, _Column] = {}
+        self._optional: tuple[str, ...] = ()
         self._events: list[tuple[float, str]] = []
 
     def __len__(self) -> int:
@@ -153,6 +165,13 @@ class RunRecord:
             if snap.field_true is None:
                 raise ValueError("this record keeps a true field, the snapshot has none")
             values["field_true"] = snap.field_true
+        if not self._columns:  # the first sample decides which optional series the run has
+            self._optional = tuple(k for k in OPTIONAL_SERIES if getattr(snap, k) is not None)
+        for k in self._optional:
+            v = getattr(snap, k)
+            if v is None:
+                raise ValueError(f"this record keeps {k}, the snapshot has none")
+            values[k] = v
         if not self._columns:
             for k, v in values.items():
                 dtype = np.float32 if k in FIELD_SERIES else float
@@ -170,10 +189,13 @@ class RunRecord:
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros(0)
         for k in FIELD_SERIES:
-            if k == "field_true" and not self.has_truth:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
+        for k in self._optional:
+            if k not in FIELD_SERIES:
+                out[k] = self._columns[k].view().copy()
         out["t_field"] = out["t"].copy()
         out["event_t"] = np.asarray([t for t, _ in self._events], float)
         out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)

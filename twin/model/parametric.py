@@ -1,0 +1,212 @@
+"""The reduced model as the estimator runs it: at the specimen's position, with calibration parameters.
+
+    theta_{j+1} = F(theta_j, u_j; w(eta_j), p) = theta_j + t_s f(theta_j, u_j; w, p)          (12a)
+
+with the terms of :mod:`twin.model.tables`.  The position enters through the weights w of the
+tabulated positions:
+
+* ``motion="averaged"``: the period-average weights of eq. (11) (constant during an
+  oscillation; the paper's model, and the one the controller uses);
+* ``motion="position_aware"``: the hat weights at the known position eta(t_j) (section 5.2 names
+  the averaged model as the cause of its 3 % TC4 error and suggests this).  For a fixed specimen
+  both are the weights at eta = 0, so both models are the same.
+
+The parameters p (relative deviations of lamp efficiency, emissivity, convection; see
+:class:`twin.model.tables.Parameters`) enter linearly, so F and its Jacobians in theta (eq. 16) and
+in p are cheap: the per-position terms are blended for the (at most two) nodes with non-zero weight.
+
+Example
+-------
+>>> import numpy as np
+>>> from twin.config import small_config
+>>> from twin.model.tables import model_tables
+>>> from twin.radiation import radiation_model
+>>> from twin.scenario import OscillationSpec
+>>> cfg = small_config()
+>>> tables = model_tables(cfg, radiation_model(cfg))
+>>> osc = OscillationSpec(enabled=True, amplitude=0.02, period=4.0)
+>>> aware = ParametricModel(tables, osc, motion="position_aware")
+>>> theta = np.full(tables.n, 900.0)
+>>> a, b = aware.step(theta, np.full(6, 0.5), 0.02), aware.step(theta, np.full(6, 0.5), -0.02)
+>>> bool(np.abs(a - b).max() > 1e-6)    # the model knows where the plate is
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.sparse
+from numpy.typing import ArrayLike, NDArray
+
+from twin.model.tables import PARAMETERS, ModelTables, Parameters
+from twin.physics.motion import average_weights, hat_interval
+from twin.scenario import OscillationSpec
+
+Array = NDArray[np.float64]
+Motion = Literal["averaged", "position_aware"]
+
+
+@dataclass(frozen=True, eq=False)
+class _Node:
+    """The radiation terms of one position (a table node, or the period average)."""
+
+    A: Array  # (n, N_s)
+    B: Array  # (n, m)
+    c_wall: Array  # (n,)
+    dA: Array | None  # emissivity sensitivities (None when emissivity is not calibrated)
+    dB: Array | None
+    dc: Array | None
+
+
+class ParametricModel:
+    """F(theta, u; eta, p) of eq. (12a) with the position handled by ``motion`` (module docstring).
+
+    Parameters
+    ----------
+    tables : the per-position terms
+    oscillation : the motion the averaged weights belong to (None or disabled: fixed at eta = 0)
+    motion : "averaged" or "position_aware"
+    calibrated : names of the parameters the estimator learns (subset of ``PARAMETERS``); only those
+        get Jacobian columns in :meth:`jac_p`
+    """
+
+    def __init__(self, tables: ModelTables, oscillation: OscillationSpec | None, *,
+                 motion: Motion = "averaged", calibrated: tuple[str, ...] = ()) -> None:
+        unknown = set(calibrated) - set(PARAMETERS)
+        if unknown:
+            raise ValueError(f"unknown calibration parameters {sorted(unknown)}; known: {PARAMETERS}")
+        self.tables = tables
+        self.fe = tables.fe
+        self.t_s = tables.t_s
+        self.oscillation = oscillation
+        self.motion: Motion = motion
+        self.calibrated = tuple(p for p in PARAMETERS if p in calibrated)
+        self._eta_list = [float(v) for v in tables.eta_nodes]
+        self._with_emissivity = "emissivity" in self.calibrated
+        self._nodes: dict[int, _Node] = {}
+        self._average = self._node_of(average_weights(tables.eta_nodes, oscillation))
+        self._mt_sparse = scipy.sparse.csr_matrix(self.fe.M_theta.T)
+
+    def with_oscillation(self, oscillation: OscillationSpec | None) -> ParametricModel:
+        """The same model for another motion (after a live switch); the per-position terms are shared."""
+        other = ParametricModel.__new__(ParametricModel)
+        other.__dict__.update(self.__dict__)
+        other.oscillation = oscillation
+        other._average = self._node_of(average_weights(self.tables.eta_nodes, oscillation))
+        return other
+
+    @property
+    def n(self) -> int:
+        return self.tables.n
+
+    @property
+    def m(self) -> int:
+        return self.tables.m
+
+    @property
+    def c_m(self) -> Array:
+        return self.fe.c_m
+
+    def _node_of(self, w: Array) -> _Node:
+        t = self.tables
+        A = np.tensordot(w, t.A, axes=1)
+        B = np.tensordot(w, t.B, axes=1)
+        c = w @ t.c_wall
+        if not self._with_emissivity:
+            return _Node(np.ascontiguousarray(A), B, c, None, None, None)
+        dA, dB, dc = t.emissivity_sensitivity
+        return _Node(np.ascontiguousarray(A), B, c, np.ascontiguousarray(np.tensordot(w, dA, axes=1)),
+                     np.tensordot(w, dB, axes=1), w @ dc)
+
+    def _table_node(self, k: int) -> _Node:
+        node = self._nodes.get(k)
+        if node is None:
+            w = np.zeros(len(self._eta_list))
+            w[k] = 1.0
+            node = self._nodes[k] = self._node_of(w)
+        return node
+
+    def positions(self, eta: float) -> list[tuple[_Node, float]]:
+        """The nodes with non-zero weight at eta, and their weights (the period average when averaged)."""
+        if self.motion == "averaged":
+            return [(self._average, 1.0)]
+        k, w = hat_interval(self._eta_list, float(eta))
+        out = [(self._table_node(k), 1.0 - w)]
+        if w > 0.0:
+            out.append((self._table_node(k + 1), w))
+        return out
+
+    def rhs(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
+        """f(theta, u; eta, p) in K/s."""
+        th = np.asarray(theta, float)
+        uv = np.asarray(u, float)
+        pv = p or Parameters()
+        t = self.tables
+        T = self.fe.field_on_cells(th).ravel()
+        T4 = (T * T) ** 2
+        f = t.L_cond @ th + (1.0 + pv.convection) * (t.L_loss @ th + t.c_loss)
+        gain = 1.0 + pv.lamp_efficiency
+        for node, w in self.positions(eta):
+            r = node.A @ T4 + gain * (node.B @ uv) + node.c_wall
+            if pv.emissivity != 0.0 and node.dA is not None:
+                r += pv.emissivity * (node.dA @ T4 + gain * (node.dB @ uv) + node.dc)  # type: ignore[operator]
+            f += w * r
+        return f
+
+    def step(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
+        """F(theta, u; eta, p) = theta + t_s f (eq. 12a)."""
+        th = np.asarray(theta, float)
+        return th + self.t_s * self.rhs(th, u, eta, p)
+
+    def radiation_jacobian(self, node: _Node, T: Array, emissivity: float = 0.0) -> Array:
+        """t_s (A + p_e dA) diag(4 T^3) M_theta of one position (n, n): the radiation part of eq. (16)."""
+        A = node.A if emissivity == 0.0 or node.dA is None else node.A + emissivity * node.dA
+        scaled = A.T * (4.0 * self.t_s * T**3)[:, None]  # (N_s, n)
+        return np.asarray((self._mt_sparse @ scaled).T)
+
+    def linear_jacobian(self, p: Parameters | None = None) -> Array:
+        """I + t_s L(p): the part of eq. (16) that depends neither on theta nor on the position."""
+        pv = p or Parameters()
+        t = self.tables
+        return np.eye(self.n) + self.t_s * (t.L_cond + (1.0 + pv.convection) * t.L_loss)
+
+    def jac_theta(self, theta: ArrayLike, u: ArrayLike | None = None, eta: float = 0.0,
+                  p: Parameters | None = None) -> Array:
+        """dF/dtheta (n, n), eq. (16), at the position's weights (exact, no caching)."""
+        pv = p or Parameters()
+        T = self.fe.field_on_cells(theta).ravel()
+        J = self.linear_jacobian(pv)
+        for node, w in self.positions(eta):
+            J += w * self.radiation_jacobian(node, T, pv.emissivity)
+        return J
+
+    def jac_p(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
+        """dF/dp (n, len(calibrated)) for the calibrated parameters, in K per unit relative deviation."""
+        th = np.asarray(theta, float)
+        uv = np.asarray(u, float)
+        pv = p or Parameters()
+        t = self.tables
+        cols = []
+        T4 = None
+        for name in self.calibrated:
+            if name == "convection":
+                cols.append(self.t_s * (t.L_loss @ th + t.c_loss))
+                continue
+            col = np.zeros(self.n)
+            for node, w in self.positions(eta):
+                if name == "lamp_efficiency":
+                    Bu = node.B @ uv
+                    if pv.emissivity != 0.0 and node.dB is not None:
+                        Bu = Bu + pv.emissivity * (node.dB @ uv)
+                    col += w * Bu
+                else:  # emissivity
+                    if T4 is None:
+                        T = self.fe.field_on_cells(th).ravel()
+                        T4 = (T * T) ** 2
+                    assert node.dA is not None and node.dB is not None and node.dc is not None
+                    col += w * (node.dA @ T4 + (1.0 + pv.lamp_efficiency) * (node.dB @ uv) + node.dc)
+            cols.append(self.t_s * col)
+        return np.column_stack(cols) if cols else np.zeros((self.n, 0))
