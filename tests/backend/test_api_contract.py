@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fake_factory, stream_frames, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import fake_factory, stream_frames, wait_status
 
 
 def make_client(tmp_path: Path, cfg, factory=None, **settings) -> TestClient:

@@ -6,9 +6,9 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import fake_factory
 
 import backend.bench as bench
+from conftest import fake_factory
 
 
 class _FakeFactory:

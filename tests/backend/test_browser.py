@@ -11,11 +11,11 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import fake_factory
 
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer, free_port
+from conftest import fake_factory
 
 pytestmark = pytest.mark.browser
 

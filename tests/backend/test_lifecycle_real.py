@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import stream_frames, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import stream_frames, wait_status
 
 SCENARIO = {"duration": 12.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
 REF_AT, NEW_REF = 3.0, {"setpoint": 950.0, "t_E": 2.0}

@@ -9,12 +9,12 @@ schemathesis pytest plugin does not load under pytest 9).
 from __future__ import annotations
 
 import schemathesis
-from conftest import fake_factory
 from hypothesis import HealthCheck, given, settings
 
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer, free_port
+from conftest import fake_factory
 
 EXAMPLES = 6
 

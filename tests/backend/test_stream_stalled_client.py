@@ -8,11 +8,11 @@ import asyncio
 import json
 import time
 
-from conftest import fake_factory
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import fake_factory
 
 
 async def stalled_client(app, path: str, accepted: list[bool]) -> None:

@@ -5,13 +5,13 @@ and the live controls act only on a picked run that still runs."""
 from __future__ import annotations
 
 import numpy as np
-from conftest import fake_factory, wait_status
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import free_port
 from backend.viser_view import AUTO, colour_range, stored_snapshot, turbo_rgb, vertex_values
+from conftest import fake_factory, wait_status
 
 
 def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
