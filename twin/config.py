@@ -288,6 +288,7 @@ class FE(_Section):
     y_nodes: tuple[float, ...] = Field(min_length=3)
     reference_temperature: float = Field(gt=0)
     capacity_range: tuple[float, float]
+    heat_capacity: Literal["constant", "temperature"] = "constant"
 
     @model_validator(mode="after")
     def _nodes(self) -> Self:

@@ -33,7 +33,8 @@ def estimator_model(choice: EstimatorChoice, tables: ModelTables, oscillation: O
     """The estimator's model for a choice: its motion, and the configured parameters if it calibrates."""
     osc = oscillation if oscillation is not None and oscillation.enabled else None
     calibrated = tuple(cfg.calibration.parameters) if choice.calibrate else ()
-    return ParametricModel(tables, osc, motion=choice.motion, calibrated=calibrated)
+    return ParametricModel(tables, osc, motion=choice.motion, calibrated=calibrated,
+                           heat_capacity=cfg.fe.heat_capacity)
 
 
 def build_estimator(choice: EstimatorChoice, tables: ModelTables, oscillation: OscillationSpec | None,

@@ -169,6 +169,7 @@ class JointEstimator:
                 cached = (theta.copy(), p.emissivity, model.radiation_jacobian(node, T, p.emissivity))
                 self._rad[id(node)] = cached
             J += w * cached[2]
+        J = model.with_capacity(J, theta, u, eta, p)
         if not k:
             return J.astype(self._cov_dtype, copy=False)
         Phi = np.zeros((n + k, n + k), dtype=self._cov_dtype)

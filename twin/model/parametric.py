@@ -11,6 +11,10 @@ tabulated positions:
   the averaged model as the cause of its 3 % TC4 error and suggests this).  For a fixed specimen
   both are the weights at eta = 0, so both models are the same.
 
+With ``cfg.fe.heat_capacity = "temperature"`` the model's heat capacity follows the steel's table
+(the Curie peak; the paper's remark in section 2.2) instead of the constant enthalpy-equivalent c_p
+of M: lumped at the nodes, f -> D(theta) f with D_i = c_bar / c_p(theta_i).
+
 The parameters p (relative deviations of lamp efficiency, emissivity, convection; see
 :class:`twin.model.tables.Parameters`) enter linearly, so F and its Jacobians in theta (eq. 16) and
 in p are cheap: the per-position terms are blended for the (at most two) nodes with non-zero weight.
@@ -42,6 +46,7 @@ import scipy.sparse
 from numpy.typing import ArrayLike, NDArray
 
 from twin.model.tables import PARAMETERS, ModelTables, Parameters
+from twin.physics.materials import Steel
 from twin.physics.motion import average_weights, hat_interval
 from twin.scenario import OscillationSpec
 
@@ -74,7 +79,8 @@ class ParametricModel:
     """
 
     def __init__(self, tables: ModelTables, oscillation: OscillationSpec | None, *,
-                 motion: Motion = "averaged", calibrated: tuple[str, ...] = ()) -> None:
+                 motion: Motion = "averaged", calibrated: tuple[str, ...] = (),
+                 heat_capacity: Literal["constant", "temperature"] = "constant") -> None:
         unknown = set(calibrated) - set(PARAMETERS)
         if unknown:
             raise ValueError(f"unknown calibration parameters {sorted(unknown)}; known: {PARAMETERS}")
@@ -89,6 +95,16 @@ class ParametricModel:
         self._nodes: dict[int, _Node] = {}
         self._average = self._node_of(average_weights(tables.eta_nodes, oscillation))
         self._mt_sparse = scipy.sparse.csr_matrix(self.fe.M_theta.T)
+        self.heat_capacity = heat_capacity
+        self._steel = Steel.from_config(tables.fe.cfg) if heat_capacity == "temperature" else None
+
+    def capacity_scaling(self, theta: Array) -> tuple[Array, Array] | None:
+        """D_i = c_bar / c_p(theta_i) and dD_i / dtheta_i (1/K) with a temperature-dependent c_p, else None."""
+        if self._steel is None:
+            return None
+        cp = self._steel.heat_capacity(theta)
+        c_bar = self.fe.heat_capacity
+        return c_bar / cp, -c_bar * self._steel.heat_capacity_slope(theta) / cp**2
 
     def with_oscillation(self, oscillation: OscillationSpec | None) -> ParametricModel:
         """The same model for another motion (after a live switch); the per-position terms are shared."""
@@ -140,7 +156,14 @@ class ParametricModel:
         return out
 
     def rhs(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
-        """f(theta, u; eta, p) in K/s."""
+        """f(theta, u; eta, p) in K/s (with the temperature-dependent capacity if configured)."""
+        f = self.rhs_constant_capacity(theta, u, eta, p)
+        scaling = self.capacity_scaling(np.asarray(theta, float))
+        return f if scaling is None else scaling[0] * f
+
+    def rhs_constant_capacity(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0,
+                              p: Parameters | None = None) -> Array:
+        """f of eq. (12a) with the constant heat capacity of M (K/s)."""
         th = np.asarray(theta, float)
         uv = np.asarray(u, float)
         pv = p or Parameters()
@@ -177,11 +200,23 @@ class ParametricModel:
                   p: Parameters | None = None) -> Array:
         """dF/dtheta (n, n), eq. (16), at the position's weights (exact, no caching)."""
         pv = p or Parameters()
-        T = self.fe.field_on_cells(theta).ravel()
+        th = np.asarray(theta, float)
+        T = self.fe.field_on_cells(th).ravel()
         J = self.linear_jacobian(pv)
         for node, w in self.positions(eta):
             J += w * self.radiation_jacobian(node, T, pv.emissivity)
-        return J
+        return self.with_capacity(J, th, u, eta, pv)
+
+    def with_capacity(self, J: Array, theta: Array, u: ArrayLike | None, eta: float, p: Parameters) -> Array:
+        """Phi of the constant-capacity model -> Phi with c_p(theta): I + D (Phi - I) + t_s diag(f dD/dtheta)."""
+        scaling = self.capacity_scaling(theta)
+        if scaling is None:
+            return J
+        D, dD = scaling
+        f = self.rhs_constant_capacity(theta, np.zeros(self.m) if u is None else u, eta, p)
+        out = D[:, None] * J
+        out[np.diag_indices(self.n)] += (1.0 - D) + self.t_s * f * dD
+        return np.asarray(out)
 
     def jac_p(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
         """dF/dp (n, len(calibrated)) for the calibrated parameters, in K per unit relative deviation."""
@@ -209,4 +244,8 @@ class ParametricModel:
                     assert node.dA is not None and node.dB is not None and node.dc is not None
                     col += w * (node.dA @ T4 + (1.0 + pv.lamp_efficiency) * (node.dB @ uv) + node.dc)
             cols.append(self.t_s * col)
-        return np.column_stack(cols) if cols else np.zeros((self.n, 0))
+        if not cols:
+            return np.zeros((self.n, 0))
+        Jp = np.column_stack(cols)
+        scaling = self.capacity_scaling(th)
+        return Jp if scaling is None else scaling[0][:, None] * Jp

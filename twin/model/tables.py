@@ -35,6 +35,8 @@ Example
 from __future__ import annotations
 
 import logging
+import threading
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Protocol
@@ -165,9 +167,36 @@ def _radiation_terms(cfg: FurnaceConfig, fe: FEModel, radiation: RadiationLike) 
     return A, B, c
 
 
+#: tables already built, per radiation model (weakly held) and furnace config: every run of a server or a
+#: campaign shares them (and the emissivity sensitivity, once computed), as it shares the radiation model
+_TABLES: weakref.WeakKeyDictionary[Any, dict[str, ModelTables]] = weakref.WeakKeyDictionary()
+_TABLES_LOCK = threading.Lock()
+
+
 def model_tables(cfg: FurnaceConfig, radiation: RadiationLike, fe: FEModel | None = None) -> ModelTables:
-    """The per-position terms of eq. (12a) for the FE model of ``cfg`` and a radiation model's tables."""
-    fe = FEModel(cfg) if fe is None else fe
+    """The per-position terms of eq. (12a) for the FE model of ``cfg`` and a radiation model's tables.
+
+    Cached per radiation model and config (unless a prebuilt ``fe`` is given): they are immutable.
+    """
+    if fe is None:
+        try:
+            with _TABLES_LOCK:
+                hit = _TABLES.get(radiation, {}).get(cfg.digest())
+        except TypeError:  # not weakly referenceable (a test's stand-in): no cache
+            hit = None
+        if hit is not None:
+            return hit
+        tables = _build(cfg, radiation, FEModel(cfg))
+        try:
+            with _TABLES_LOCK:
+                _TABLES.setdefault(radiation, {})[cfg.digest()] = tables
+        except TypeError:
+            pass
+        return tables
+    return _build(cfg, radiation, fe)
+
+
+def _build(cfg: FurnaceConfig, radiation: RadiationLike, fe: FEModel) -> ModelTables:
     s = cfg.specimen
     d, b = face_loss_coefficients(cfg)
     G, Mt, Bs = fe.G, fe.M_theta, s.thickness

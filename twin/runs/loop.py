@@ -351,5 +351,5 @@ class ClosedLoop:
         with self._lock:
             return self.record.arrays()
 
-    def metrics(self) -> dict[str, float]:
+    def metrics(self) -> dict[str, Any]:
         return self.record.metrics()

@@ -43,7 +43,33 @@ METRIC_KEYS = (
     "true_inhomogeneity_steady",
     "true_mean_error_steady_max",
     "field_estimation_error_steady_max",
+    "tc4_error_oscillation_amplitude",
 )
+#: the estimator outputs a shadow estimator records under ``shadow_<key>`` (twin.runs.record)
+SHADOW_OUTPUTS = ("T_mean_hat", "tc_hat", "field_hat")
+PARAMETER_NAMES = ("lamp_efficiency", "emissivity", "convection")  # the order of the record's ``parameters``
+
+
+def oscillation_amplitude(t: Array, e: Array, period: float) -> float:
+    """Amplitude of the component of e(t) at the frequency 1/period: sqrt(a^2 + b^2) of the least-squares
+    fit e ~ a sin(w t) + b cos(w t) + c, w = 2 pi / period (NaN with fewer than 3 finite samples)."""
+    ok = np.isfinite(e)
+    if ok.sum() < 3:
+        return float("nan")
+    w = 2.0 * np.pi / period
+    X = np.column_stack([np.sin(w * t[ok]), np.cos(w * t[ok]), np.ones(int(ok.sum()))])
+    (a, b, _), *_ = np.linalg.lstsq(X, e[ok], rcond=None)
+    return float(np.hypot(a, b))
+
+
+def _oscillation_period(ts: Mapping[str, Any]) -> float | None:
+    """The scenario's oscillation period (s) if the run oscillated (from the recorded scenario and eta)."""
+    import json
+
+    if "scenario" not in ts or not np.any(np.asarray(ts.get("eta", [0.0])) != 0.0):
+        return None
+    osc = json.loads(str(ts["scenario"])).get("oscillation") or {}
+    return float(osc["period"]) if osc.get("enabled") and osc.get("period") else None
 
 
 def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"]) -> NDArray[np.bool_]:
@@ -99,6 +125,9 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
     else:  # no truth (a real furnace), or no samples
         sup_true = true_mean_err = est_err = np.full(tf.size, np.nan)
     trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")
+    period = _oscillation_period(ts)
+    osc_amp = (oscillation_amplitude(t[st], tc_err[st, 3], period)
+               if period is not None and t.size else float("nan"))
 
     return {
         "mean_error_transient_max": _max(mean_err, tr),
@@ -111,4 +140,21 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
         "true_inhomogeneity_steady": _mean(sup_true, stf),
         "true_mean_error_steady_max": _max(true_mean_err, stf),
         "field_estimation_error_steady_max": _max(est_err, stf),
+        "tc4_error_oscillation_amplitude": osc_amp,
     }
+
+
+def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`compute_metrics`, plus ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating
+    run) and ``shadow`` (the shadow estimator's metrics) when the run has them (product.md)."""
+    out: dict[str, Any] = dict(compute_metrics(ts))
+    if "parameters" in ts and len(ts["parameters"]):
+        values, sigma = np.asarray(ts["parameters"][-1], float), np.asarray(ts["parameter_sigma"][-1], float)
+        out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
+                              for i, name in enumerate(PARAMETER_NAMES) if np.isfinite(values[i])}
+    if all(f"shadow_{k}" in ts for k in SHADOW_OUTPUTS):
+        shadow = dict(ts)
+        for k in SHADOW_OUTPUTS:
+            shadow[k] = ts[f"shadow_{k}"]
+        out["shadow"] = compute_metrics(shadow)
+    return out

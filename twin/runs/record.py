@@ -201,11 +201,11 @@ class RunRecord:
         out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
         return out
 
-    def metrics(self) -> dict[str, float]:
-        """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
-        from twin.runs.metrics import compute_metrics
+    def metrics(self) -> dict[str, Any]:
+        """The run metrics of product.md (:func:`twin.runs.metrics.run_metrics`)."""
+        from twin.runs.metrics import run_metrics
 
-        return compute_metrics(self.arrays())
+        return run_metrics(self.arrays())
 
     def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> None:
         """Write :meth:`arrays` atomically (see :func:`save_arrays`)."""
