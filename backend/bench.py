@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from backend.app import create_app
-from backend.run_manager import DefaultLoopFactory
+from backend.loop_factory import DefaultLoopFactory
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer
 from twin.config import FurnaceConfig

@@ -1,15 +1,31 @@
-"""Typed FastAPI dependencies: the run manager, the repository and the API-token check."""
+"""Typed FastAPI dependencies: the run manager, the settings, the API-token check and the request
+bodies checked against the loaded furnace (``twin.limits``)."""
 
 from __future__ import annotations
 
 import secrets
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
 
-from fastapi import Depends, Header, HTTPException, Request, status
+from fastapi import Body, Depends, Header, HTTPException, Request, status
+from fastapi.exceptions import RequestValidationError
+from pydantic import SkipValidation, ValidationError
 
-from backend.repository import RunRepository
 from backend.run_manager import RunManager
 from backend.settings import Settings
+from twin.limits import ScenarioLimits
+from twin.scenario import (
+    OscillationSpec,
+    PointsReference,
+    Reference,
+    Scenario,
+    TransitionReference,
+    parse_oscillation,
+    parse_reference,
+    parse_scenario,
+)
+
+T = TypeVar("T")
 
 
 def get_settings(request: Request) -> Settings:
@@ -20,11 +36,6 @@ def get_settings(request: Request) -> Settings:
 def get_manager(request: Request) -> RunManager:
     manager: RunManager = request.app.state.manager
     return manager
-
-
-def get_repo(request: Request) -> RunRepository:
-    repo: RunRepository = request.app.state.repo
-    return repo
 
 
 def require_token(
@@ -48,6 +59,46 @@ def require_token(
 
 
 ManagerDep = Annotated[RunManager, Depends(get_manager)]
-RepoDep = Annotated[RunRepository, Depends(get_repo)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 TokenDep = Depends(require_token)
+
+
+# ---- request bodies: documented by their model, validated against the loaded furnace ----
+# FastAPI validates a body without context, so the models' furnace-dependent limits would be the
+# default furnace's; SkipValidation hands the JSON over as sent and the dependency validates it
+# with the server's limits (fields left out take this furnace's defaults).  Errors keep FastAPI's
+# 422 shape, with the location under "body".
+
+
+def _validated(parse: Callable[[Any, ScenarioLimits], T], body: Any, limits: ScenarioLimits) -> T:
+    try:
+        return parse(body, limits)
+    except ValidationError as exc:
+        errors = [{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]
+        raise RequestValidationError(errors, body=body) from None
+
+
+def scenario_body(
+    manager: ManagerDep,
+    body: Annotated[Scenario | None, SkipValidation, Body(title="Scenario",
+                                                         description="every field optional: GET /api/furnace "
+                                                                     "has the limits and defaults")] = None,
+) -> Scenario:
+    return _validated(parse_scenario, body, manager.limits)
+
+
+def reference_body(
+    manager: ManagerDep, body: Annotated[Reference, SkipValidation, Body(title="Reference")],
+) -> TransitionReference | PointsReference:
+    return _validated(parse_reference, body, manager.limits)
+
+
+def oscillation_body(
+    manager: ManagerDep, body: Annotated[OscillationSpec, SkipValidation, Body(title="OscillationSpec")],
+) -> OscillationSpec:
+    return _validated(parse_oscillation, body, manager.limits)
+
+
+ScenarioBody = Annotated[Scenario, Depends(scenario_body)]
+ReferenceBody = Annotated[TransitionReference | PointsReference, Depends(reference_body)]
+OscillationBody = Annotated[OscillationSpec, Depends(oscillation_body)]

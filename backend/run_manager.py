@@ -4,6 +4,11 @@ Each run is an asyncio task (:meth:`RunManager._drive`) on the server's event lo
 numerics never run on the event loop: the task hands :meth:`RunWorker.advance` to the
 run's own single-thread executor, then publishes the latest snapshot as a stream frame
 (at most ``stream_max_hz`` per second) and sleeps until the next sample is due.
+
+The routes and both UIs use only the public methods below (start, stop, change; run, runs,
+changes, status, latest, in_force, scenario, live_runs; files, hub, last_frame;
+call_from_thread for a UI on another thread).  Scenarios and changes are checked against the
+furnace's limits (``twin.limits``) before they reach a run.
 """
 
 from __future__ import annotations
@@ -11,23 +16,28 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import logging
-import threading
 import time
 import uuid
 from collections import OrderedDict
+from collections.abc import Coroutine
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
+
+from pydantic import ValidationError
 
 from backend.fanout import StreamHub
-from backend.frames import events_of, frame_json
-from backend.repository import RunRepository
+from backend.frames import SnapshotLike, events_of, frame_json
+from backend.loop_factory import DefaultLoopFactory
+from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow
 from backend.run_files import RunFiles, write_json_atomic
-from backend.run_worker import ChangeRejected, LoopFactory, LoopLike, RunWorker
+from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
 from twin.config import FurnaceConfig
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.limits import ScenarioLimits, scenario_limits
+from twin.scenario import OscillationSpec, Reference, Scenario, check
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 ADVANCE_BUDGET_S = 0.05  # wall s of stepping per executor call: bounds frame latency at speed max
 
@@ -45,59 +55,39 @@ class TooManyRuns(RuntimeError):
 
 
 class LimitExceeded(ValueError):
-    """The scenario asks for more than the server allows (run length, speed) (422)."""
+    """The scenario asks for more than the furnace or the server allows (amplitude, run length, speed) (422)."""
 
 
-class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+@dataclass(frozen=True)
+class LiveSample:
+    """The latest sample of a running run: its snapshot, sequence number and the run's status."""
 
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._radiation: dict[str, Any] = {}
-        self._T_range: dict[str, tuple[float, float]] = {}
+    snapshot: SnapshotLike
+    seq: int
+    status: str
 
-    def radiation(self, cfg: FurnaceConfig) -> Any:
-        from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
 
-        key = cfg.digest()
-        with self._lock:
-            if key not in self._radiation:
-                self._radiation[key] = radiation_model(cfg)
-            return self._radiation[key]
+@dataclass(frozen=True)
+class InForce:
+    """The reference and oscillation a run uses now (after live changes), as JSON objects."""
 
-    def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
-        """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
-        ``None`` if they cannot be computed (the run's own build then reports the problem)."""
-        key = cfg.digest()
-        if key in self._T_range:
-            return self._T_range[key]
-        try:
-            from twin.control.reference import reachable_range
-            from twin.model.discrete import discrete_model
+    reference: dict[str, Any]
+    oscillation: dict[str, Any]
 
-            T_range = reachable_range(discrete_model(cfg, self.radiation(cfg), None), cfg)
-        except Exception:
-            log.exception("cannot compute the reachable temperature range; references are checked by the run")
-            return None
-        self._T_range[key] = T_range
-        return T_range
 
-    def check_reference(self, cfg: FurnaceConfig, reference: Reference) -> None:
-        """Raise ``ValueError`` (``twin.control.reference.ReferenceError``) if the loop would refuse ``reference``
-        at the start of a run, so ``POST /api/runs`` answers 422 instead of a run that ends in error."""
-        T_range = self.reachable_range(cfg)
-        if T_range is None:
-            return
-        from twin.control.reference import reference_trajectory
+def in_force(scenario: dict[str, Any], changes: list[ChangeRow]) -> InForce:
+    """The scenario's reference and oscillation, replaced by each applied change in turn (an ended run)."""
+    current = {"reference": scenario.get("reference") or {}, "oscillation": scenario.get("oscillation") or {}}
+    for ch in changes:
+        if ch.status == "applied" and ch.kind in current:
+            current[ch.kind] = ch.body
+    return InForce(**current)
 
-        reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
-        from twin.runs.loop import ClosedLoop
-
-        # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg), background=True)
-        return loop
+def _say(exc: ValidationError) -> str:
+    """A pydantic error as one line that names each field."""
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
+                     for e in exc.errors())
 
 
 @dataclass(eq=False)
@@ -121,14 +111,19 @@ class RunManager:
         cfg: FurnaceConfig,
         repo: RunRepository,
         loop_factory: LoopFactory | None = None,
+        *,
+        limits: ScenarioLimits | None = None,
+        event_loop: asyncio.AbstractEventLoop | None = None,
     ) -> None:
         self.settings = settings
         self.cfg = cfg
-        self.repo = repo
+        #: every scenario limit and default: the furnace's, within this server's run length and speed
+        self.limits = (limits or scenario_limits(cfg)).capped(settings.max_duration_s, settings.max_speed)
         self.loop_factory: LoopFactory = loop_factory or DefaultLoopFactory()
-        self.active: dict[str, ActiveRun] = {}
+        self._repo = repo
+        self._runs: dict[str, ActiveRun] = {}
         self._last_frames: OrderedDict[str, str] = OrderedDict()
-        self.event_loop: asyncio.AbstractEventLoop | None = None
+        self._loop = event_loop
         self._shutting_down = False
 
     def files(self, run_id: str) -> RunFiles:
@@ -136,6 +131,11 @@ class RunManager:
 
     # ---- start ----
     def check_limits(self, scenario: Scenario) -> None:
+        """Raise :class:`LimitExceeded` if the scenario lies outside the furnace's or this server's limits."""
+        try:
+            check(scenario, self.limits)
+        except ValidationError as exc:
+            raise LimitExceeded(_say(exc)) from None
         s = self.settings
         problems = []
         if scenario.duration > s.max_duration_s:
@@ -155,31 +155,31 @@ class RunManager:
                 await asyncio.to_thread(check, self.cfg, scenario.reference)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
-        running = sum(1 for a in self.active.values() if a.status in ("queued", "starting", "running"))
+        running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
-        self.event_loop = asyncio.get_running_loop()
+        self._loop = asyncio.get_running_loop()
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
         files.folder.mkdir(parents=True, exist_ok=True)
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
-        self.repo.create_run(run_id, scenario.to_json())
-        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self.repo, files, self.loop_factory)
+        self._repo.create_run(run_id, scenario.to_json())
+        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
             executor=concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"run-{run_id}"),
             wake=asyncio.Event(),
         )
-        self.active[run_id] = run
+        self._runs[run_id] = run
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
         return run_id
 
     def _set_status(self, run_id: str, run: ActiveRun, status: str, error: str | None = None) -> None:
         run.status = status
-        self.repo.set_status(run_id, status, error=error)
+        self._repo.set_status(run_id, status, error=error)
 
     def _publish(self, run_id: str, run: ActiveRun, events: list[str] | None = None) -> None:
         w = run.worker
@@ -253,7 +253,7 @@ class RunManager:
             except Exception:
                 log.exception("run %s: finalising failed", run_id)
             run.status = final
-            self.repo.set_status(run_id, final, error=error)
+            self._repo.set_status(run_id, final, error=error)
             if w.latest is not None:
                 run.hub.publish(frame_json(w.latest, run_id=run_id, seq=w.seq, wall_time=w.latest_wall,
                                            status=final, events=unsent_events))
@@ -263,14 +263,14 @@ class RunManager:
                 while len(self._last_frames) > 64:
                     self._last_frames.popitem(last=False)
             run.executor.shutdown(wait=False)
-            self.active.pop(run_id, None)
+            self._runs.pop(run_id, None)
             log.info("run %s %s", run_id, final)
 
     # ---- control ----
     def _active(self, run_id: str) -> ActiveRun:
-        run = self.active.get(run_id)
+        run = self._runs.get(run_id)
         if run is None:
-            if self.repo.get(run_id) is None:
+            if self._repo.get(run_id) is None:
                 raise RunNotFound(run_id)
             raise RunNotActive(f"run {run_id} is not running")
         return run
@@ -281,12 +281,18 @@ class RunManager:
         run.wake.set()
 
     async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned."""
+        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned.
+
+        A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
         run = self._active(run_id)
+        try:
+            check(value, self.limits)
+        except ValidationError as exc:
+            raise ChangeRejected(_say(exc)) from None
         if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
             raise RunNotActive(f"run {run_id} is {run.status}")
         body = value.model_dump(mode="json")
-        change_id = self.repo.add_change(run_id, kind, body)
+        change_id = self._repo.add_change(run_id, kind, body)
         fut = run.worker.submit_change(kind, value, change_id)
         run.wake.set()
         try:
@@ -298,25 +304,79 @@ class RunManager:
             raise
         return {"id": change_id, "kind": kind, "body": body, **result}
 
+    # ---- what the routes and the UIs read ----
+    def run(self, run_id: str) -> RunRow:
+        """The run's record (status as stored; :meth:`status` has the live one); :class:`RunNotFound` if none."""
+        row = self._repo.get(run_id)
+        if row is None:
+            raise RunNotFound(f"no run with id {run_id!r}")
+        return row
+
+    def runs(self, limit: int = 200) -> list[RunRow]:
+        """Every run, newest first."""
+        return self._repo.list_runs(limit)
+
+    def changes(self, run_id: str) -> list[ChangeRow]:
+        """The reference / oscillation changes requested while the run ran, oldest first."""
+        return self._repo.changes(run_id)
+
+    def status(self, run_id: str) -> str | None:
+        """The live status of a run this server drives (``None`` if it does not drive it)."""
+        run = self._runs.get(run_id)
+        return None if run is None else run.status
+
+    def live_runs(self) -> list[str]:
+        """Ids of the runs this server drives (queued, starting, running), newest first."""
+        return sorted(self._runs, key=lambda k: self._runs[k].started_monotonic, reverse=True)
+
+    def latest(self, run_id: str) -> LiveSample | None:
+        """The latest sample of a run this server drives; ``None`` if it drives none or no sample yet."""
+        run = self._runs.get(run_id)
+        if run is None:
+            return None
+        w = run.worker
+        snap, seq = w.latest, w.seq
+        return None if snap is None else LiveSample(snap, seq, run.status)
+
+    def scenario(self, run_id: str) -> dict[str, Any]:
+        """The run's scenario as it was started (JSON object)."""
+        run = self._runs.get(run_id)
+        if run is not None:
+            return run.worker.scenario.model_dump(mode="json")
+        return self.run(run_id).scenario
+
+    def in_force(self, run_id: str) -> InForce:
+        """The reference and oscillation the run uses now; for an ended run, the last ones in force."""
+        run = self._runs.get(run_id)
+        if run is not None:
+            w = run.worker
+            return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"))
+        return in_force(self.run(run_id).scenario, self.changes(run_id))
+
     def hub(self, run_id: str) -> StreamHub | None:
-        run = self.active.get(run_id)
+        run = self._runs.get(run_id)
         return None if run is None else run.hub
 
     def last_frame(self, run_id: str) -> str | None:
-        run = self.active.get(run_id)
+        run = self._runs.get(run_id)
         if run is not None:
             return run.hub.latest
         return self._last_frames.get(run_id)
 
-    def status(self, run_id: str) -> str | None:
-        run = self.active.get(run_id)
-        return None if run is None else run.status
+    def call_from_thread(self, coro: Coroutine[Any, Any, T], timeout: float | None = None) -> T:
+        """Run one of the manager's coroutines from another thread (a UI's) on the server's event loop
+        and return its result (its exception is raised here); ``timeout`` defaults to the change timeout."""
+        if self._loop is None or self._loop.is_closed():
+            coro.close()
+            raise RuntimeError("the server is not ready")
+        future = asyncio.run_coroutine_threadsafe(coro, self._loop)
+        return future.result(timeout=self.settings.change_timeout_s if timeout is None else timeout)
 
     async def shutdown(self, timeout: float = 30.0) -> None:
         """Stop every run and wait for its final flush (server shutdown)."""
         self._shutting_down = True
         tasks = []
-        for run in list(self.active.values()):
+        for run in list(self._runs.values()):
             run.worker.stop_requested.set()
             run.wake.set()
             if run.task is not None:

@@ -56,12 +56,15 @@ class RunSummary(BaseModel):
     ended_at: float | None = None
     scenario: dict[str, Any]
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
-    metrics: dict[str, float | None] | None = None
+    metrics: dict[str, Any] | None = Field(None, description="product.md metrics (calibration, shadow: objects)")
     error: str | None = None
     links: RunLinks
 
 
 class RunDetail(RunSummary):
+    reference: dict[str, Any] = Field(description="the reference in force now (after live changes); "
+                                                  "for an ended run, the last one in force")
+    oscillation: dict[str, Any] = Field(description="the oscillation in force now, likewise")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
 
@@ -69,3 +72,31 @@ class RunDetail(RunSummary):
 class StopResult(BaseModel):
     id: str
     status: str = Field(description="'stopping': the run ends at its next sample and keeps its data")
+
+
+class LampGroupOut(BaseModel):
+    name: str
+    lamps: list[str] = Field(description="'h3' = 3rd horizontal lamp, 'v-1' = last vertical lamp, ...")
+
+
+class FurnaceOut(BaseModel):
+    """The loaded furnace: what the dashboard draws and every scenario limit and default."""
+
+    name: str = Field(description="shipped furnace name or file stem; 'custom' if unknown")
+    L_s: float = Field(description="specimen length (m)")
+    W_s: float = Field(description="specimen width (m)")
+    B_s: float = Field(description="specimen thickness (m)")
+    nx: int = Field(description="FD cells along x")
+    ny: int = Field(description="FD cells along y")
+    x: list[float] = Field(description="cell centres along x (m)")
+    y: list[float] = Field(description="cell centres along y (m)")
+    fillet: list[float] = Field(description="x0, x1, y0, y1 of the fillet (m)")
+    eta_max: float = Field(description="largest oscillation amplitude (m)")
+    t_s: float = Field(description="sampling time (s)")
+    lamps: dict[str, Any] = Field(description="lamp arrays: count, pitch, distance (m) per side")
+    tc_relative: list[list[float]] = Field(description="TC1..TC4 (x / L_s, y / W_s); TC4 is the validation TC")
+    tc_positions: list[list[float]] = Field(description="TC1..TC4 in m")
+    groups: list[LampGroupOut] = Field(description="lamp groups, in the order of the power vector u")
+    limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
+                                               "{min, max, exclusive_min, unit, default}")
+    defaults: dict[str, Any] = Field(description="the scenario a POST with an empty body starts")

@@ -13,9 +13,10 @@ import threading
 from pathlib import Path
 
 from backend.app import create_app
-from backend.run_manager import DefaultLoopFactory
+from backend.loop_factory import DefaultLoopFactory
 from backend.settings import DEFAULT_DATA_DIR, Settings
 from twin.config import FurnaceConfig
+from twin.limits import furnace_name
 
 log = logging.getLogger(__name__)
 
@@ -35,9 +36,11 @@ def serve(
     port: int = 8000,
     viser_port: int = 8080,
     data_dir: str | Path | None = None,
+    furnace: str | None = None,
 ) -> int:
     """Run the server until interrupted; returns the process exit status.
 
+    ``furnace`` is the ``--config`` value that ``cfg`` came from (its label in ``GET /api/furnace``).
     A non-loopback ``host`` is refused unless an API token is set
     (``FURNACE_TWIN_API_TOKEN``), so the furnace is never controllable from the network
     without one.
@@ -53,7 +56,8 @@ def serve(
         return 2
     factory = DefaultLoopFactory()
     threading.Thread(target=_warm_up, args=(factory, cfg), name="radiation-warm-up", daemon=True).start()
-    app = create_app(settings, cfg, loop_factory=factory, viser=True)
+    app = create_app(settings, cfg, loop_factory=factory, viser=True,
+                     furnace_name=furnace_name(cfg, furnace) if furnace else None)
     log.info("dashboard on http://%s:%d/ , data in %s", host, port, settings.data_dir.resolve())
     server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="info"))
     server.run()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -47,8 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--schedule", default=None, help="JSON file [[t, [u1..u6]], ...] (zero-order hold)")
     s.add_argument("--duration", type=float, default=240.0, help="s")
     s.add_argument("--oscillate", action="store_true", help="eta = amplitude sin(2 pi t / period)")
-    s.add_argument("--amplitude", type=float, default=0.048, help="m")
-    s.add_argument("--period", type=float, default=18.0, help="s")
+    s.add_argument("--amplitude", type=float, default=None,
+                   help="m (default: the furnace's, 3 L_h capped at its eta_max)")
+    s.add_argument("--period", type=float, default=None, help="s (default 18)")
     s.add_argument("--tc4", type=_rel_point, default=(0.5, 0.5))
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", default="out/simulate")
@@ -90,14 +92,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
-    from twin.config import ConfigError, load_config
+    from twin.config import CONFIG_ENV_VAR, ConfigError, load_config
 
     try:
         cfg = load_config(args.config)
         if args.command == "serve":
             from backend.server import serve
 
-            return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir)
+            return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir,
+                         furnace=args.config or os.environ.get(CONFIG_ENV_VAR))
         if args.command == "precompute":
             from twin.radiation.cache import precompute_command
 

@@ -4,11 +4,23 @@ Every field has a default, so ``Scenario()`` is the paper's fixed-specimen exper
 with TC4 in the middle.  Validation errors name the field (pydantic), and the backend
 turns them into 422 responses.
 
+Bounds and defaults come from ``twin.limits``.  Those that depend on the furnace (the
+oscillation amplitude at most its ``eta_max``, the setpoint and reference-point range,
+the default amplitude, TC4 position and TC noise) are checked against the limits given
+as validation context -- :func:`parse_scenario` and friends, or
+``Scenario.model_validate(data, context={"limits": limits})`` -- and a field left out
+takes that furnace's default.  Without a context, the default furnace's limits apply.
+
 Example
 -------
 >>> s = Scenario.model_validate({"oscillation": {"enabled": True}})
 >>> s.oscillation.amplitude, s.reference.setpoint
 (0.048, 1100.0)
+>>> from twin.config import small_config
+>>> from twin.limits import scenario_limits
+>>> low = scenario_limits(small_config().with_overrides({"oscillation.eta_max": 0.03}))
+>>> parse_scenario({"oscillation": {"enabled": True}}, low).oscillation.amplitude
+0.03
 """
 
 from __future__ import annotations
@@ -16,10 +28,42 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    TypeAdapter,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
-MAX_DURATION_S = 3600.0
-MAX_SPEED = 1000.0
+from twin import limits as lim
+from twin.limits import ScenarioLimits, default_limits
+
+MAX_DURATION_S = lim.MAX_DURATION_S
+MAX_SPEED = lim.SPEED.hi
+_DEFAULT = default_limits()  # the Field defaults below: the default furnace's (its file is the owner)
+
+
+def _context_limits(info: ValidationInfo) -> ScenarioLimits | None:
+    """The furnace limits given as validation context, if any."""
+    given = info.context.get("limits") if isinstance(info.context, dict) else None
+    return given if isinstance(given, ScenarioLimits) else None
+
+
+def _limits(info: ValidationInfo) -> ScenarioLimits:
+    """The furnace limits of this validation: the context's, else the default furnace's."""
+    return _context_limits(info) or _DEFAULT
+
+
+def _check(r: lim.Range, value: float) -> float:
+    problem = r.problem(value)
+    if problem is not None:
+        raise ValueError(problem)
+    return value
 
 
 class _Model(BaseModel):
@@ -29,8 +73,21 @@ class _Model(BaseModel):
 class TransitionReference(_Model):
     """The paper's reference: C1 polynomial transition from the initial mean to ``setpoint`` over ``t_E``."""
 
-    setpoint: float = Field(1100.0, gt=300.0, le=1300.0, description="T_ref(t_E) in K")
-    t_E: float = Field(120.0, gt=1.0, le=MAX_DURATION_S, description="transition time in s")
+    setpoint: float = Field(_DEFAULT.setpoint.default, description="T_ref(t_E) in K; range: GET /api/furnace")
+    t_E: float = Field(lim.T_E.default, gt=lim.T_E.lo, le=lim.T_E.hi, description="transition time in s")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
+        given = _context_limits(info)
+        if given is not None and isinstance(data, dict):
+            return {"setpoint": given.setpoint.default, **data}
+        return data
+
+    @field_validator("setpoint")
+    @classmethod
+    def _setpoint(cls, v: float, info: ValidationInfo) -> float:
+        return _check(_limits(info).setpoint, v)
 
 
 class PointsReference(_Model):
@@ -40,17 +97,18 @@ class PointsReference(_Model):
 
     @field_validator("points")
     @classmethod
-    def _points(cls, v: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    def _points(cls, v: list[tuple[float, float]], info: ValidationInfo) -> list[tuple[float, float]]:
         ts = [p[0] for p in v]
         if ts[0] < 0:
             raise ValueError("times must be >= 0 s")
         if any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
             raise ValueError("times must be strictly increasing")
-        if ts[-1] > MAX_DURATION_S:
-            raise ValueError(f"times must be <= {MAX_DURATION_S:g} s")
+        if ts[-1] > lim.POINT_TIME.hi:
+            raise ValueError(f"times must be <= {lim.POINT_TIME.hi:g} s")
+        temps = _limits(info).point_temperature
         for _, temp in v:
-            if not 250.0 <= temp <= 1300.0:
-                raise ValueError(f"temperature {temp} K is outside the reachable range 250..1300 K")
+            if temps.problem(temp) is not None:
+                raise ValueError(f"temperature {temp} K is outside the reachable range {temps.lo:g}..{temps.hi:g} K")
         return v
 
     @property
@@ -80,16 +138,31 @@ class OscillationSpec(_Model):
     """eta(t) = amplitude sin(2 pi t / period) (paper section 5.2: 3 L_h sin(2 pi t / Pi), Pi = 0.15 t_E)."""
 
     enabled: bool = False
-    amplitude: float = Field(0.048, ge=0.0, le=0.05, description="m; at most the furnace's eta_max")
-    period: float = Field(18.0, ge=1.0, le=600.0, description="s")
+    amplitude: float = Field(_DEFAULT.amplitude.default, ge=0.0,
+                             description="m; at most the furnace's eta_max, default 3 L_h capped at it "
+                                         "(GET /api/furnace)")
+    period: float = Field(lim.PERIOD.default, ge=lim.PERIOD.lo, le=lim.PERIOD.hi, description="s")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
+        given = _context_limits(info)
+        if given is not None and isinstance(data, dict):
+            return {"amplitude": given.amplitude.default, **data}
+        return data
+
+    @field_validator("amplitude")
+    @classmethod
+    def _amplitude(cls, v: float, info: ValidationInfo) -> float:
+        return _check(_limits(info).amplitude, v)
 
 
 class Mismatch(_Model):
     """Relative deviations of the plant from the model (0.05 = plant 5 % higher)."""
 
-    emissivity: float = Field(0.0, ge=-0.5, le=0.1)
-    alpha: float = Field(0.0, ge=-0.9, le=2.0)
-    lamp_efficiency: float = Field(0.0, ge=-0.5, le=0.5)
+    emissivity: float = Field(0.0, ge=lim.MISMATCH_EMISSIVITY.lo, le=lim.MISMATCH_EMISSIVITY.hi)
+    alpha: float = Field(0.0, ge=lim.MISMATCH_ALPHA.lo, le=lim.MISMATCH_ALPHA.hi)
+    lamp_efficiency: float = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
 
 
 class EstimatorChoice(_Model):
@@ -116,19 +189,31 @@ class EstimatorSpec(EstimatorChoice):
 
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
-    duration: float = Field(240.0, gt=0.0, le=MAX_DURATION_S, description="s")
+    duration: float = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
     oscillation: OscillationSpec = Field(default_factory=OscillationSpec)
-    tc4: tuple[float, float] = Field((0.5, 0.5), description="relative (x / L_s, y / W_s)")
-    speed: Literal["max"] | float = Field("max", description="'max' or a real-time factor")
+    tc4: tuple[float, float] = Field(_DEFAULT.tc4, description="relative (x / L_s, y / W_s)")
+    speed: Literal["max"] | float = Field(lim.SPEED.default, description="'max' or a real-time factor")
     mismatch: Mismatch = Field(default_factory=Mismatch)
-    tc_noise: float = Field(1.0, ge=0.0, le=50.0, description="TC noise standard deviation, K")
-    seed: int = Field(0, ge=0, le=2**31 - 1)
+    tc_noise: float = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
+                            description="TC noise standard deviation, K")
+    seed: int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
     estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
+        """With a furnace's limits, what is left out takes its defaults (nested models too)."""
+        given = _context_limits(info)
+        if given is not None and isinstance(data, dict):
+            return {"reference": {}, "oscillation": {}, "tc4": given.tc4, "tc_noise": given.tc_noise.default,
+                    **data}
+        return data
 
     @field_validator("tc4")
     @classmethod
     def _tc4(cls, v: tuple[float, float]) -> tuple[float, float]:
-        if not (0.0 <= v[0] <= 1.0 and 0.0 <= v[1] <= 1.0):
+        r = lim.TC4_RELATIVE
+        if r.problem(v[0]) is not None or r.problem(v[1]) is not None:
             raise ValueError("tc4 is relative: both coordinates must lie in [0, 1]")
         return v
 
@@ -137,9 +222,40 @@ class Scenario(_Model):
     def _speed(cls, v: str | float) -> str | float:
         if isinstance(v, str):
             return v
-        if not 0.01 <= v <= MAX_SPEED:
-            raise ValueError(f"speed must be 'max' or a real-time factor in [0.01, {MAX_SPEED:g}]")
+        if not lim.SPEED.lo <= v <= MAX_SPEED:
+            raise ValueError(f"speed must be 'max' or a real-time factor in [{lim.SPEED.lo:g}, {MAX_SPEED:g}]")
         return float(v)
 
     def to_json(self) -> str:
         return json.dumps(self.model_dump(mode="json"), sort_keys=True)
+
+
+_REFERENCE: TypeAdapter[Reference] = TypeAdapter(Reference)
+
+
+def parse_scenario(data: Any, limits: ScenarioLimits | None = None) -> Scenario:
+    """A scenario from JSON data, checked against ``limits`` (default: the default furnace's);
+    fields left out take that furnace's defaults.  Raises ``pydantic.ValidationError`` naming each field."""
+    return Scenario.model_validate({} if data is None else data, context={"limits": limits or _DEFAULT})
+
+
+def parse_oscillation(data: Any, limits: ScenarioLimits | None = None) -> OscillationSpec:
+    """An oscillation (``PUT .../oscillation``) checked against ``limits``, as :func:`parse_scenario`."""
+    return OscillationSpec.model_validate(data, context={"limits": limits or _DEFAULT})
+
+
+def parse_reference(data: Any, limits: ScenarioLimits | None = None) -> TransitionReference | PointsReference:
+    """A reference (``PUT .../reference``) checked against ``limits``, as :func:`parse_scenario`."""
+    return _REFERENCE.validate_python(data, context={"limits": limits or _DEFAULT})
+
+
+def check(value: Scenario | OscillationSpec | TransitionReference | PointsReference, limits: ScenarioLimits) -> None:
+    """Raise ``pydantic.ValidationError`` (naming the field) if a scenario, oscillation or reference that was
+    built elsewhere (e.g. without a furnace) lies outside ``limits``."""
+    data = value.model_dump(mode="json")
+    if isinstance(value, Scenario):
+        parse_scenario(data, limits)
+    elif isinstance(value, OscillationSpec):
+        parse_oscillation(data, limits)
+    else:
+        parse_reference(data, limits)

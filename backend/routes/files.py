@@ -8,15 +8,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse
 
-from backend.deps import ManagerDep, RepoDep
+from backend.deps import ManagerDep
 from backend.series import load_series
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
 
 
-def _file(run_id: str, manager: ManagerDep, repo: RepoDep, which: str) -> Path:
-    if repo.get(run_id) is None:  # the id comes from the database before it names a folder
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no run with id {run_id!r}")
+def _file(run_id: str, manager: ManagerDep, which: str) -> Path:
+    manager.run(run_id)  # 404 unless the id comes from the database, before it names a folder
     files = manager.files(run_id)
     path: Path = getattr(files, which)
     if not path.is_file():
@@ -27,26 +26,26 @@ def _file(run_id: str, manager: ManagerDep, repo: RepoDep, which: str) -> Path:
 @router.get("/{run_id}/recording", response_class=FileResponse,
             responses={200: {"content": {"application/octet-stream": {}}},
                        404: {"description": "no such run or no recording"}})
-def recording(run_id: str, manager: ManagerDep, repo: RepoDep) -> FileResponse:
+def recording(run_id: str, manager: ManagerDep) -> FileResponse:
     """The rerun recording (``.rrd``); open it with ``rerun FILE``."""
-    path = _file(run_id, manager, repo, "recording")
+    path = _file(run_id, manager, "recording")
     return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd")
 
 
 @router.get("/{run_id}/timeseries", response_class=FileResponse,
             responses={200: {"content": {"application/octet-stream": {}}},
                        404: {"description": "no such run or no time series"}})
-def timeseries(run_id: str, manager: ManagerDep, repo: RepoDep) -> FileResponse:
+def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
     """The raw time series (``.npz``, layout in product.md), flushed every few seconds while running."""
-    path = _file(run_id, manager, repo, "timeseries")
+    path = _file(run_id, manager, "timeseries")
     return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")
 
 
 @router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
-def series(run_id: str, manager: ManagerDep, repo: RepoDep,
+def series(run_id: str, manager: ManagerDep,
            max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> dict[str, Any]:
     """The stored time series as JSON (decimated to ``max_points``) for charts of any run."""
-    path = _file(run_id, manager, repo, "timeseries")
+    path = _file(run_id, manager, "timeseries")
     try:
         return load_series(path, max_points)
     except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout

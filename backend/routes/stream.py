@@ -9,8 +9,7 @@ import logging
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from fastapi.responses import PlainTextResponse
 
-from backend.repository import RunRepository
-from backend.run_manager import RunManager
+from backend.run_manager import RunManager, RunNotFound
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/runs", tags=["stream"])
@@ -27,9 +26,10 @@ async def _deny(ws: WebSocket, code: int, message: str) -> None:
 async def stream(ws: WebSocket, run_id: str) -> None:
     """Frames of a running run until it ends; an ended run sends its last frame and closes."""
     manager: RunManager = ws.app.state.manager
-    repo: RunRepository = ws.app.state.repo
-    if repo.get(run_id) is None:
-        await _deny(ws, 404, f"no run with id {run_id!r}")
+    try:
+        manager.run(run_id)
+    except RunNotFound as exc:
+        await _deny(ws, 404, str(exc))
         return
     hub = manager.hub(run_id)
     await ws.accept()

@@ -220,3 +220,47 @@ def test_dashboard_asks_for_the_token(browser, tmp_path, small_cfg, artifacts) -
         assert httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()["status"] == "stopped"
         assert not errors, errors
         page.close()
+
+
+def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
+    """On a furnace whose eta_max (30 mm) is below the paper's 3 L_h = 48 mm, the amplitude inputs stop at
+    30 mm and start there; a start leaving it as shown runs with 30 mm; a live amplitude above it gets the
+    server's 422 on the message line, and the live inputs show what the server says the run uses."""
+    from twin.config import load_config
+    from twin.limits import furnace_name
+
+    path = tmp_path / "low_stroke.toml"
+    path.write_text('base = "default"\n[oscillation]\neta_max = 0.03\n')
+    cfg = load_config(path)
+    s = Settings(data_dir=tmp_path / "data", viser_port=0, max_duration_s=900.0)
+    app = create_app(s, cfg, loop_factory=fake_factory(), furnace_name=furnace_name(cfg, path))
+    with ThreadedServer(app, free_port()) as srv:
+        page, errors = _open_dashboard(browser, srv.url)
+        bounds = _js(page, "['amplitude', 'duration'].map((n) => { const e = document.querySelector("
+                           "`#start-form [name=${n}]`); return [e.min, e.max, e.value]; })")
+        assert bounds == [["0", "0.03", "0.03"], ["1", "900", "240"]]
+        assert _js(page, "document.getElementById('live-amplitude').max") == "0.03"
+        assert "furnace low_stroke · η ≤ 30 mm" in _text(page, "header")
+        page.check("input[name=osc]")
+        page.fill("input[name=speed]", "1")
+        page.click("#start-btn")
+        _wait_text(page, "#start-msg", "started")
+        run_id = _js(page, "state.runId")
+        run = httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()
+        assert run["oscillation"] == {"enabled": True, "amplitude": 0.03, "period": 18.0}
+        _wait_text(page, "#osc-btn", "Oscillation off")  # the run oscillates: the server says so
+        page.fill("#live-amplitude", "0.04")
+        page.click("#osc-btn")
+        _wait_text(page, "#ctl-msg", "422")
+        assert "amplitude: at most 0.03 m (eta_max of furnace 'low_stroke'), got 0.04 m" in _text(page, "#ctl-msg")
+        page.fill("#live-amplitude", "0.02")
+        page.click("#osc-btn")  # off, with the amplitude typed
+        _wait_text(page, "#ctl-msg", "oscillation off: applied")
+        _wait_text(page, "#osc-btn", "Oscillation on")
+        page.screenshot(path=str(artifacts / "dashboard-low-stroke.png"))
+        after = httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()
+        assert after["oscillation"] == {"enabled": False, "amplitude": 0.02, "period": 18.0}
+        page.click("#stop-btn")
+        _wait_text(page, "#ctl-msg", "; its data is kept", timeout=30_000)
+        assert not errors, errors
+        page.close()

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from backend.viser_view import LAMP_OFF, LAMP_ON, MIN_SPAN_K, colour_range, lamp_colors, plate_mesh, turbo_rgb
+from backend.viser import LAMP_OFF, LAMP_ON, MIN_SPAN_K, colour_range, lamp_colors, plate_mesh, turbo_rgb
 from twin.physics.geometry import specimen_plate_mesh
 
 
 def test_vertex_values_of_a_linear_field_are_exact_inside(small_cfg) -> None:
-    from backend.viser_view import vertex_values
+    from backend.viser import vertex_values
 
     s = small_cfg.specimen
     x = (np.arange(s.nx) + 0.5) / s.nx * s.length

@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import free_port
-from backend.viser_view import AUTO, colour_range, stored_snapshot, turbo_rgb, vertex_values
+from backend.viser import AUTO, colour_range, stored_snapshot, turbo_rgb, vertex_values
 from conftest import fake_factory, wait_status
 
 
@@ -28,33 +28,33 @@ def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
         wait_status(c, live, {"running"})
         c.get(f"/api/runs/{live}")  # let a few samples through
         view.refresh_runs(force=True)
-        options = list(view.in_run.options)
+        options = list(view.gui.run.options)
         assert options[0] == AUTO and len(options) == 3
         assert any(o.startswith(done) and "1 points to 700 K" in o for o in options)
         assert any(o.startswith(live) for o in options)
 
         view.update()  # nothing picked: the newest running run
-        assert f"run `{live}`" in view.md_status.content and "running" in view.md_status.content
+        assert f"run `{live}`" in view.gui.status.content and "running" in view.gui.status.content
         assert view._followed() == live
 
         view.pick(done)
-        assert view.in_run.value.startswith(done) and view.follow == done
+        assert view.gui.run.value.startswith(done) and view.follow == done
         view.update()
-        assert f"run `{done}`" in view.md_status.content and "finished" in view.md_status.content
+        assert f"run `{done}`" in view.gui.status.content and "finished" in view.gui.status.content
         last = stored_snapshot(tmp_path / "data" / "runs" / done / "timeseries.npz",
                                (small_cfg.specimen.ny, small_cfg.specimen.nx))
         assert last is not None and last.has_field and last.t == 3.0
-        assert "t = 3.0 s (last sample)" in view.md_status.content
+        assert "t = 3.0 s (last sample)" in view.gui.status.content
         expected = turbo_rgb(vertex_values(last.field_hat), *colour_range(last.field_hat))
-        np.testing.assert_array_equal(view._plate_rgb, expected)  # the finished run's last field is drawn
+        np.testing.assert_array_equal(view.scene.plate_rgb, expected)  # the finished run's last field is drawn
         # the live controls never reach the other (running) run while a finished one is shown
         assert view._followed() is None and done in view._not_running()
 
         view.pick(None)  # back to following the running run
-        assert view.in_run.value == AUTO
+        assert view.gui.run.value == AUTO
         view.update()
-        assert f"run `{live}`" in view.md_status.content and view._followed() == live
+        assert f"run `{live}`" in view.gui.status.content and view._followed() == live
         c.post(f"/api/runs/{live}/stop")
         wait_status(c, live, {"stopped"})
         view.update()  # the followed run ended: its last sample, from its file
-        assert f"run `{live}`" in view.md_status.content and "stopped" in view.md_status.content
+        assert f"run `{live}`" in view.gui.status.content and "stopped" in view.gui.status.content

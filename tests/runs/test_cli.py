@@ -36,3 +36,26 @@ def test_bad_tc4_is_an_argparse_error(value):
 def test_console_script_help_runs():
     out = subprocess.run([sys.executable, "-m", "twin.cli", "--help"], capture_output=True, text=True, check=True)
     assert "campaign" in out.stdout and "bench" in out.stdout
+
+
+def test_run_and_simulate_check_the_scenario_against_the_furnace(tmp_path, capsys):
+    """A furnace whose eta_max (30 mm) is below the default amplitude (3 L_h = 48 mm): an amplitude above it
+    is a clear error before any run; a scenario that leaves the amplitude out takes the furnace's."""
+    from twin.config import load_config
+    from twin.limits import furnace_name, scenario_limits
+    from twin.runs.runner import load_scenario
+
+    low = tmp_path / "low_stroke.toml"
+    low.write_text('base = "default"\n[oscillation]\neta_max = 0.03\n')
+    sc = tmp_path / "s.json"
+    sc.write_text('{"oscillation": {"enabled": true, "amplitude": 0.048}}')
+    assert main(["--config", str(low), "run", "--scenario", str(sc), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "oscillation.amplitude: at most 0.03 m (eta_max of furnace 'low_stroke'), got 0.048 m" in err
+    assert "Traceback" not in err and not (tmp_path / "o").exists()
+    assert main(["--config", str(low), "simulate", "--oscillate", "--amplitude", "0.04",
+                 "--out", str(tmp_path / "sim")]) == 2
+    assert "--amplitude: at most 0.03 m" in capsys.readouterr().err
+    cfg = load_config(low)
+    left_out = load_scenario(None, scenario_limits(cfg, furnace_name(cfg, low)), oscillate=True)
+    assert left_out.oscillation.enabled and left_out.oscillation.amplitude == 0.03

@@ -52,11 +52,12 @@ def plant_rtf(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> fl
     0.6 u_max, cold start, one ``advance`` per sample t_s.
     """
     from twin.furnace.simulated.plant import Plant
+    from twin.limits import scenario_limits
     from twin.physics.motion import eta_function
     from twin.scenario import OscillationSpec
 
     plant = Plant(cfg, radiation)
-    amplitude = min(3.0 * cfg.lamps.horizontal.pitch, cfg.oscillation.eta_max)
+    amplitude = scenario_limits(cfg).amplitude.default  # the paper's 3 L_h, capped at eta_max
     eta = eta_function(OscillationSpec(enabled=True, amplitude=amplitude, period=18.0))
     u = np.full(cfg.n_groups, 0.6)
     t_s = cfg.sampling.t_s

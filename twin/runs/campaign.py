@@ -18,8 +18,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.config import FurnaceConfig
+from twin.limits import scenario_limits
 from twin.runs.metrics import METRIC_KEYS
-from twin.scenario import OscillationSpec, Scenario, TransitionReference
+from twin.scenario import Scenario, parse_scenario
 
 if TYPE_CHECKING:
     from twin.runs.runner import SinkFactory
@@ -51,23 +52,20 @@ PAPER: dict[str, dict[str, float]] = {
 
 
 def campaign_scenarios(cfg: FurnaceConfig, t_E: float = 120.0) -> list[tuple[str, Scenario]]:
-    """The six experiments; the oscillation is the paper's 3 L_h sin(2 pi t / (0.15 t_E))."""
-    amplitude = min(3 * cfg.lamps.horizontal.pitch, cfg.oscillation.eta_max)
+    """The six experiments; the oscillation is the paper's 3 L_h sin(2 pi t / (0.15 t_E)), its amplitude
+    capped at the furnace's eta_max (the furnace's default amplitude, ``twin.limits``)."""
+    limits = scenario_limits(cfg)
     out = []
     for oscillating in (False, True):
         for tc4 in TC4_POSITIONS:
             name = f"{'oscillating' if oscillating else 'fixed'}_tc4_{tc4[0]:g}"
-            out.append(
-                (
-                    name,
-                    Scenario(
-                        reference=TransitionReference(setpoint=1100.0, t_E=t_E),
-                        duration=2 * t_E,
-                        oscillation=OscillationSpec(enabled=oscillating, amplitude=amplitude, period=0.15 * t_E),
-                        tc4=tc4,
-                    ),
-                )
-            )
+            scenario = parse_scenario({
+                "reference": {"setpoint": 1100.0, "t_E": t_E},
+                "duration": 2 * t_E,
+                "oscillation": {"enabled": oscillating, "period": 0.15 * t_E},
+                "tc4": list(tc4),
+            }, limits)
+            out.append((name, scenario))
     return out
 
 

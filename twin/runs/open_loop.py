@@ -28,7 +28,8 @@ from numpy.typing import NDArray
 from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
-from twin.scenario import MAX_DURATION_S, OscillationSpec
+from twin.limits import furnace_name, scenario_limits
+from twin.scenario import MAX_DURATION_S, OscillationSpec, parse_oscillation
 
 log = logging.getLogger(__name__)
 
@@ -140,18 +141,17 @@ def run_open_loop(
 
 
 def _oscillation(cfg: FurnaceConfig, args: Any) -> OscillationSpec:
+    """--oscillate / --amplitude / --period, checked against the furnace (``twin.limits``); an option
+    left out (None) takes the furnace's default."""
     if not args.oscillate:
         return OscillationSpec.model_validate({"enabled": False})
+    given = {"amplitude": args.amplitude, "period": args.period}
     try:
-        spec = OscillationSpec.model_validate({"enabled": True, "amplitude": args.amplitude, "period": args.period})
+        return parse_oscillation({"enabled": True, **{k: v for k, v in given.items() if v is not None}},
+                                 scenario_limits(cfg, furnace_name(cfg, getattr(args, "config", None))))
     except ValidationError as exc:
-        msgs = "; ".join(f"--{e['loc'][-1]}: {e['msg']}" for e in exc.errors())
+        msgs = "; ".join(f"--{e['loc'][-1]}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors())
         raise SimulateArgumentError(msgs) from None
-    if spec.amplitude > cfg.oscillation.eta_max + 1e-12:
-        raise SimulateArgumentError(
-            f"--amplitude: {spec.amplitude} m exceeds the furnace's eta_max = {cfg.oscillation.eta_max} m"
-        )
-    return spec
 
 
 def simulate_command(cfg: FurnaceConfig, args: Any) -> int:

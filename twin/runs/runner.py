@@ -20,9 +20,10 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
+from twin.limits import ScenarioLimits, furnace_name, scenario_limits
 from twin.runs.loop import ClosedLoop
 from twin.runs.record import Snapshot, save_arrays
-from twin.scenario import Scenario
+from twin.scenario import Scenario, parse_scenario
 
 log = logging.getLogger(__name__)
 
@@ -44,8 +45,16 @@ class ScenarioError(ValueError):
     """A scenario file or option is invalid; the message says which field and why."""
 
 
-def load_scenario(path: str | None, *, oscillate: bool = False, tc4: tuple[float, float] | None = None) -> Scenario:
-    """Read a scenario JSON file (or the defaults) and apply command-line overrides."""
+def load_scenario(
+    path: str | None,
+    limits: ScenarioLimits | None = None,
+    *,
+    oscillate: bool = False,
+    tc4: tuple[float, float] | None = None,
+) -> Scenario:
+    """Read a scenario JSON file (or the defaults) and apply command-line overrides; the scenario is
+    checked against the furnace's ``limits`` (``twin.limits``; default: the default furnace's) and
+    fields the file leaves out take that furnace's defaults."""
     data: dict[str, Any] = {}
     if path is not None:
         try:
@@ -61,9 +70,10 @@ def load_scenario(path: str | None, *, oscillate: bool = False, tc4: tuple[float
     if tc4 is not None:
         data["tc4"] = list(tc4)
     try:
-        return Scenario.model_validate(data)
+        return parse_scenario(data, limits)
     except ValidationError as exc:
-        msgs = [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()]
+        msgs = [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
+                for e in exc.errors()]
         raise ScenarioError("invalid scenario:\n  " + "\n  ".join(msgs)) from None
 
 
@@ -113,7 +123,8 @@ def _json_safe(d: Any) -> Any:
 def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
     """``furnace-twin run``: one closed-loop run from a scenario file."""
     try:
-        scenario = load_scenario(args.scenario, oscillate=args.oscillate, tc4=args.tc4)
+        limits = scenario_limits(cfg, furnace_name(cfg, getattr(args, "config", None)))
+        scenario = load_scenario(args.scenario, limits, oscillate=args.oscillate, tc4=args.tc4)
     except ScenarioError as exc:
         print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
         return 2

@@ -1,0 +1,36 @@
+"""``GET /api/furnace``: the loaded furnace, what the dashboard draws and every scenario limit and default."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from backend.deps import ManagerDep
+from backend.schemas import FurnaceOut, LampGroupOut
+from twin.physics.grid import cell_centers
+from twin.scenario import parse_scenario
+
+router = APIRouter(prefix="/api", tags=["furnace"])
+
+
+@router.get("/furnace", response_model=FurnaceOut)
+def furnace(manager: ManagerDep) -> FurnaceOut:
+    """Name, geometry summary, TC positions, lamp groups, and the scenario limits and defaults
+    (``twin.limits``: the furnace's, within this server's run length and speed)."""
+    cfg, limits = manager.cfg, manager.limits
+    s, lamps = cfg.specimen, cfg.lamps
+    x, y = cell_centers(cfg)
+    return FurnaceOut(
+        name=limits.furnace,
+        L_s=s.length, W_s=s.width, B_s=s.thickness, nx=s.nx, ny=s.ny,
+        x=x.tolist(), y=y.tolist(),
+        fillet=list(cfg.fillet),
+        eta_max=cfg.oscillation.eta_max,
+        t_s=cfg.sampling.t_s,
+        lamps={side: {"count": a.count, "pitch": a.pitch, "distance": a.distance}
+               for side, a in (("horizontal", lamps.horizontal), ("vertical", lamps.vertical))},
+        tc_relative=[list(p) for p in cfg.sensors.relative_positions],
+        tc_positions=[list(p) for p in cfg.tc_positions()],
+        groups=[LampGroupOut(name=g.name, lamps=list(g.lamps)) for g in lamps.groups],
+        limits=limits.to_json(),
+        defaults=parse_scenario({}, limits).model_dump(mode="json"),
+    )

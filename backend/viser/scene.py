@@ -1,0 +1,164 @@
+"""The furnace on the 3D scene: plate, lamps, reflectors, holders, window, housing and TC markers.
+
+The specimen plate is coloured per vertex by the estimated field and moves with eta between
+the two lamp arrays; each lamp is coloured by its group's power (dark = off, bright yellow =
+u_max); the gold reflectors, the holders (moving with the plate), the quartz window and,
+optionally, the housing are drawn from ``twin.physics.geometry.display_meshes``.  TC markers
+show their readings.  :meth:`FurnaceScene.show` puts one snapshot on the scene in one
+``server.atomic()`` block.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import trimesh
+import viser
+
+from backend.frames import SnapshotLike
+from twin.config import FurnaceConfig
+from twin.physics.geometry import display_meshes, specimen_plate_mesh
+
+GOLD = (212, 175, 55)
+LAMP_OFF = np.array([70, 70, 78], dtype=float)
+LAMP_ON = np.array([255, 236, 80], dtype=float)
+MIN_SPAN_K = 10.0  # colour range of the plate spans at least this many kelvin
+#: shadows cost a lot in software WebGL (headless browsers, remote desktops) and add nothing here
+NO_SHADOW: dict[str, Any] = {"cast_shadow": False, "receive_shadow": False}
+
+
+def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Temperatures (K) -> uint8 RGB with matplotlib's turbo map over [lo, hi]."""
+    from matplotlib import colormaps
+
+    x = np.clip((np.asarray(values, dtype=float) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+    return (colormaps["turbo"](x)[..., :3] * 255).astype(np.uint8)
+
+
+def colour_range(field: np.ndarray, step: float = 5.0) -> tuple[float, float]:
+    """Colour range (K) of the plate: its min..max widened to multiples of ``step`` and to at
+    least ``MIN_SPAN_K``, so the colours do not flicker with the noise of the estimate."""
+    f = np.asarray(field, dtype=float)
+    finite = f[np.isfinite(f)]
+    if not finite.size:
+        return (290.0, 310.0)
+    lo, hi = step * np.floor(finite.min() / step), step * np.ceil(finite.max() / step)
+    if hi - lo < MIN_SPAN_K:
+        mid = 0.5 * (lo + hi)
+        lo, hi = mid - MIN_SPAN_K / 2, mid + MIN_SPAN_K / 2
+    return (float(lo), float(hi))
+
+
+def vertex_values(field: np.ndarray) -> np.ndarray:
+    """Cell-centred field (N_y, N_x) -> vertex values ((N_y+1) (N_x+1),) by averaging the
+    (up to four) cells around each vertex; vertex (i, j) at index i + (N_x + 1) j."""
+    f = np.asarray(field, dtype=float)
+    p = np.pad(f, 1, mode="edge")
+    v = 0.25 * (p[:-1, :-1] + p[1:, :-1] + p[:-1, 1:] + p[1:, 1:])
+    return v.ravel()
+
+
+def plate_mesh(cfg: FurnaceConfig, colors: np.ndarray) -> trimesh.Trimesh:
+    """Both faces of the specimen at eta = 0 with per-vertex colours ((N_x+1)(N_y+1), 3) uint8."""
+    verts, faces, _ = specimen_plate_mesh(cfg, 0.0)
+    back = verts.copy()
+    back[:, 2] = -back[:, 2]
+    n = len(verts)
+    return trimesh.Trimesh(
+        vertices=np.vstack([verts, back]),
+        faces=np.vstack([faces, faces[:, ::-1] + n]),
+        vertex_colors=np.vstack([colors, colors]),
+        process=False,
+    )
+
+
+def lamp_colors(cfg: FurnaceConfig, u: np.ndarray) -> np.ndarray:
+    """(N_lamps, 3) uint8: each lamp coloured by the power fraction of its group (0 if none)."""
+    frac = np.clip(cfg.group_matrix @ np.nan_to_num(np.asarray(u, dtype=float)), 0.0, 1.0)
+    return (LAMP_OFF + frac[:, None] * (LAMP_ON - LAMP_OFF)).astype(np.uint8)
+
+
+class FurnaceScene:
+    """The scene's handles; :meth:`show` redraws only what a snapshot changed."""
+
+    def __init__(self, server: viser.ViserServer, cfg: FurnaceConfig) -> None:
+        self.server = server
+        self.cfg = cfg
+        self.lamps: list[Any] = []
+        self.holders: list[Any] = []
+        self.housing: list[Any] = []
+        self.tc_markers: list[Any] = []
+        self.tc_labels: list[Any] = []
+        self.plate_rgb: np.ndarray | None = None  # vertex colours on the plate now
+        self._lamp_rgb: np.ndarray | None = None
+        self._build()
+
+    def _build(self) -> None:
+        sc, s = self.server.scene, self.cfg.specimen
+        sc.set_up_direction("-x")  # x points down along the specimen (default_furnace.toml frame)
+        # from the vertical-lamp side: those lamps are sparse, so the plate is seen between them
+        self.server.initial_camera.position = (s.length / 2 + 0.05, s.width / 2 + 0.32, -0.55)
+        self.server.initial_camera.look_at = (s.length / 2, s.width / 2, 0.0)
+        self.server.initial_camera.up = (-1.0, 0.0, 0.0)
+        for name, kind, verts, faces in display_meshes(self.cfg, 0.0):
+            if kind == "lamp":
+                self.lamps.append(sc.add_mesh_simple(f"/furnace/lamps/{name}", verts, faces, color=tuple(LAMP_OFF),
+                                                     **NO_SHADOW))
+            elif kind == "reflector":
+                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=GOLD, opacity=0.18, side="double",
+                                   **NO_SHADOW)
+            elif kind == "holder":
+                self.holders.append(sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(110, 120, 135),
+                                                       **NO_SHADOW))
+            elif kind == "window":
+                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(170, 210, 240), opacity=0.15,
+                                   side="double", **NO_SHADOW)
+            elif kind == "housing":
+                self.housing.append(sc.add_mesh_simple(f"/furnace/housing/{name}", verts, faces,
+                                                       color=(150, 155, 165), opacity=0.12, side="double",
+                                                       visible=False, **NO_SHADOW))
+        field = np.full((s.ny, s.nx), s.initial_temperature)
+        cold = turbo_rgb(vertex_values(field), 290.0, 310.0)
+        self.plate = sc.add_mesh_trimesh("/furnace/specimen", plate_mesh(self.cfg, cold), **NO_SHADOW)
+        for k, (x, y) in enumerate(self.cfg.tc_positions()):
+            color = (255, 80, 200) if k == 3 else (255, 255, 255)
+            self.tc_markers.append(sc.add_icosphere(f"/furnace/tc/TC{k + 1}", radius=0.004, color=color,
+                                                    position=(x, y, 0.0), **NO_SHADOW))  # pokes out of both faces
+            self.tc_labels.append(sc.add_label(f"/furnace/tc/TC{k + 1}/label", f"TC{k + 1}",
+                                               position=(0.0, 0.0, 0.0),
+                                               anchor="bottom-left" if k == 1 else "top-left"))
+
+    def show_housing(self, visible: bool) -> None:
+        with self.server.atomic():
+            for h in self.housing:
+                h.visible = visible
+
+    def show(self, snap: SnapshotLike, tc_positions: Sequence[tuple[float, float]]) -> tuple[float, float]:
+        """Put one snapshot on the scene (plate colours and position, lamps, TCs at ``tc_positions``
+        in m at eta = 0); returns the plate's colour range (K)."""
+        field = np.asarray(snap.field_hat, dtype=float)
+        lo, hi = colour_range(field)
+        eta = float(snap.eta)
+        colours = turbo_rgb(vertex_values(field), lo, hi)
+        rgb = lamp_colors(self.cfg, np.asarray(snap.u))
+        with self.server.atomic():
+            if self.plate_rgb is None or not np.array_equal(colours, self.plate_rgb):
+                # a new GLB only when a vertex colour changed (each one costs the browser a parse)
+                self.plate = self.server.scene.add_mesh_trimesh(
+                    "/furnace/specimen", plate_mesh(self.cfg, colours), position=(eta, 0.0, 0.0), **NO_SHADOW)
+                self.plate_rgb = colours
+            else:
+                self.plate.position = (eta, 0.0, 0.0)
+            for h in self.holders:
+                h.position = (eta, 0.0, 0.0)
+            for k, handle in enumerate(self.lamps):
+                if self._lamp_rgb is None or not np.array_equal(rgb[k], self._lamp_rgb[k]):
+                    handle.color = tuple(int(c) for c in rgb[k])
+            self._lamp_rgb = rgb
+            for k, (x, y) in enumerate(tc_positions):
+                self.tc_markers[k].position = (x + eta, y, 0.0)
+                reading = float(np.asarray(snap.tc)[k])
+                self.tc_labels[k].text = f"TC{k + 1} {reading:.1f} K" if np.isfinite(reading) else f"TC{k + 1} –"
+        return lo, hi
