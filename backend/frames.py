@@ -4,7 +4,9 @@ Keys of the contract: ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K, fill
 estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``, ``tc_hat``
 (the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
 of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
-(unix s when the sample was computed, for latency), ``status`` and ``events``.
+(unix s when the sample was computed, for latency), ``status`` and ``events``; with a calibrating
+estimator ``calibration`` ({name: {"value", "sigma"}}, relative deviations), with a shadow
+estimator ``shadow`` ({"T_mean_hat", "tc_hat", "field_delta": shadow minus estimate, N_y x N_x, K}).
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ import math
 from typing import Any, Protocol
 
 import numpy as np
+
+from twin.model.tables import PARAMETERS
 
 FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps frames small
 
@@ -49,6 +53,16 @@ class SnapshotLike(Protocol):
     def true_inhomogeneity(self) -> float | None: ...
     @property
     def events(self) -> Any: ...
+    @property
+    def parameters(self) -> Any: ...  # (3,) calibrated deviations or None
+    @property
+    def parameter_sigma(self) -> Any: ...
+    @property
+    def shadow_T_mean_hat(self) -> float | None: ...
+    @property
+    def shadow_tc_hat(self) -> Any: ...
+    @property
+    def shadow_field_hat(self) -> Any: ...
 
 
 def finite_or_none(x: Any) -> float | None:
@@ -72,8 +86,28 @@ def events_of(ev: Any) -> list[str]:
     return [str(e) for e in ev]
 
 
+def calibration_values(s: SnapshotLike) -> dict[str, dict[str, float | None]] | None:
+    """{name: {"value", "sigma"}} of the calibrated parameters of a snapshot, or None."""
+    if s.parameters is None:
+        return None
+    values = np.asarray(s.parameters, dtype=float)
+    sigma = np.asarray(s.parameter_sigma if s.parameter_sigma is not None else np.full(len(values), np.nan), float)
+    return {name: {"value": finite_or_none(values[i]), "sigma": finite_or_none(sigma[i])}
+            for i, name in enumerate(PARAMETERS) if np.isfinite(values[i])}
+
+
 def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     """The small part of a snapshot (no fields): stored as the run's latest values."""
+    out = _scalars(s)
+    calibration = calibration_values(s)
+    if calibration is not None:
+        out["calibration"] = calibration
+    if s.shadow_T_mean_hat is not None:
+        out["shadow"] = {"T_mean_hat": finite_or_none(s.shadow_T_mean_hat), "tc_hat": _vector(s.shadow_tc_hat)}
+    return out
+
+
+def _scalars(s: SnapshotLike) -> dict[str, Any]:
     return {
         "t": float(s.t),
         "eta": float(s.eta),
@@ -94,17 +128,25 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
     """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample
     since the previous frame, so none is lost when samples are not streamed one by one)."""
     field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
-    field = np.where(np.isfinite(field), field, np.nan)
     frame = scalar_values(s)
     frame.update(
         run_id=run_id,
         seq=seq,
         wall_time=wall_time,
         status=status,
-        field=[[finite_or_none(v) for v in row] for row in field],
+        field=_grid(field),
         events=events_of(s.events) if events is None else list(events),
     )
+    shadow_field = s.shadow_field_hat
+    if shadow_field is not None and "shadow" in frame:
+        delta = np.round(np.asarray(shadow_field, dtype=float) - np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
+        frame["shadow"]["field_delta"] = _grid(delta)
     return frame
+
+
+def _grid(field: Any) -> list[list[float | None]]:
+    f = np.asarray(field, dtype=float)
+    return [[finite_or_none(v) for v in row] for row in np.where(np.isfinite(f), f, np.nan)]
 
 
 def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,

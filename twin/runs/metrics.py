@@ -28,6 +28,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.model.tables import PARAMETERS  # the order of the record's ``parameters``
 from twin.physics.fillet import Fillet
 
 Array = NDArray[np.float64]
@@ -47,7 +48,6 @@ METRIC_KEYS = (
 )
 #: the estimator outputs a shadow estimator records under ``shadow_<key>`` (twin.runs.record)
 SHADOW_OUTPUTS = ("T_mean_hat", "tc_hat", "field_hat")
-PARAMETER_NAMES = ("lamp_efficiency", "emissivity", "convection")  # the order of the record's ``parameters``
 
 
 def oscillation_amplitude(t: Array, e: Array, period: float) -> float:
@@ -151,7 +151,7 @@ def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     if "parameters" in ts and len(ts["parameters"]):
         values, sigma = np.asarray(ts["parameters"][-1], float), np.asarray(ts["parameter_sigma"][-1], float)
         out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
-                              for i, name in enumerate(PARAMETER_NAMES) if np.isfinite(values[i])}
+                              for i, name in enumerate(PARAMETERS) if np.isfinite(values[i])}
     if all(f"shadow_{k}" in ts for k in SHADOW_OUTPUTS):
         shadow = dict(ts)
         for k in SHADOW_OUTPUTS:
