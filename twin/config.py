@@ -343,6 +343,7 @@ class Calibration(_Section):
     random_walk: ParameterValues  # 1/sqrt(s): the parameter's assumed drift rate
     bounds: ParameterBounds
     replan_threshold: float = Field(gt=0)  # a parameter move (relative) that re-plans the controller
+    replan_interval: float = Field(ge=0)  # s between two re-plans for the calibration
 
 
 class FeedforwardWeights(_Section):

@@ -55,8 +55,33 @@ Motion = Literal["averaged", "position_aware"]
 
 
 @dataclass(frozen=True, eq=False)
+class Evaluation:
+    """f of eq. (12a) at one (theta, u, eta, p) with its parts: the constant-capacity f (K/s), the cell
+    field T (K), and the derivatives of f in the parameters: ``loss`` (d f / d p_c), ``lamps``
+    (d f / d p_L), ``emission`` (d f / d p_e, None unless the emissivity is calibrated); ``capacity``
+    the (D, dD/dtheta) of a temperature-dependent heat capacity, else None."""
+
+    theta: Array
+    T: Array
+    f: Array
+    loss: Array
+    lamps: Array
+    emission: Array | None
+    capacity: tuple[Array, Array] | None
+
+    @property
+    def rate(self) -> Array:
+        """d theta / dt (K/s): f, scaled by D with a temperature-dependent heat capacity."""
+        return self.f if self.capacity is None else self.capacity[0] * self.f
+
+
+@dataclass(frozen=True, eq=False)
 class _Node:
-    """The radiation terms of one position (a table node, or the period average)."""
+    """The radiation terms of one position (a table node, or the period average).
+
+    With the emissivity calibrated, ``AdA`` = [A; dA] (2n, N_s) and ``BdB`` = [B; dB] (2n, m) stacked, so
+    one product gives both (the products stream the matrices from memory once).
+    """
 
     A: Array  # (n, N_s)
     B: Array  # (n, m)
@@ -64,6 +89,8 @@ class _Node:
     dA: Array | None  # emissivity sensitivities (None when emissivity is not calibrated)
     dB: Array | None
     dc: Array | None
+    AdA: Array | None = None
+    BdB: Array | None = None
 
 
 class ParametricModel:
@@ -134,8 +161,9 @@ class ParametricModel:
         if not self._with_emissivity:
             return _Node(np.ascontiguousarray(A), B, c, None, None, None)
         dA, dB, dc = t.emissivity_sensitivity
-        return _Node(np.ascontiguousarray(A), B, c, np.ascontiguousarray(np.tensordot(w, dA, axes=1)),
-                     np.tensordot(w, dB, axes=1), w @ dc)
+        dA_w, dB_w = np.tensordot(w, dA, axes=1), np.tensordot(w, dB, axes=1)
+        return _Node(np.ascontiguousarray(A), B, c, dA_w, dB_w, w @ dc,
+                     np.ascontiguousarray(np.vstack([A, dA_w])), np.ascontiguousarray(np.vstack([B, dB_w])))
 
     def _table_node(self, k: int) -> _Node:
         node = self._nodes.get(k)
@@ -155,34 +183,44 @@ class ParametricModel:
             out.append((self._table_node(k + 1), w))
         return out
 
-    def rhs(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
-        """f(theta, u; eta, p) in K/s (with the temperature-dependent capacity if configured)."""
-        f = self.rhs_constant_capacity(theta, u, eta, p)
-        scaling = self.capacity_scaling(np.asarray(theta, float))
-        return f if scaling is None else scaling[0] * f
-
-    def rhs_constant_capacity(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0,
-                              p: Parameters | None = None) -> Array:
-        """f of eq. (12a) with the constant heat capacity of M (K/s)."""
+    def evaluate(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Evaluation:
+        """Everything one sample needs, computed once: f, its parts by parameter, the cell field."""
         th = np.asarray(theta, float)
         uv = np.asarray(u, float)
         pv = p or Parameters()
         t = self.tables
         T = self.fe.field_on_cells(th).ravel()
         T4 = (T * T) ** 2
-        f = t.L_cond @ th + (1.0 + pv.convection) * (t.L_loss @ th + t.c_loss)
+        loss = t.L_loss @ th + t.c_loss
+        f = t.L_cond @ th + (1.0 + pv.convection) * loss
         gain = 1.0 + pv.lamp_efficiency
+        lamps = np.zeros(self.n)  # sum_w (B + p_e dB) u: d f / d p_L
+        emission = np.zeros(self.n) if self._with_emissivity else None  # d f / d p_e
+        n = self.n
         for node, w in self.positions(eta):
-            r = node.A @ T4 + gain * (node.B @ uv) + node.c_wall
-            if pv.emissivity != 0.0 and node.dA is not None:
-                r += pv.emissivity * (node.dA @ T4 + gain * (node.dB @ uv) + node.dc)  # type: ignore[operator]
+            if node.AdA is not None and node.BdB is not None and node.dc is not None and emission is not None:
+                AT4, BU = node.AdA @ T4, node.BdB @ uv
+                d = AT4[n:] + node.dc
+                Bu = BU[:n] + pv.emissivity * BU[n:]
+                r = AT4[:n] + node.c_wall + pv.emissivity * d
+                emission += w * (d + gain * BU[n:])
+            else:
+                Bu = node.B @ uv
+                r = node.A @ T4 + node.c_wall
+            lamps += w * Bu
             f += w * r
-        return f
+        f += gain * lamps
+        return Evaluation(theta=th, T=T, f=f, loss=loss, lamps=lamps, emission=emission,
+                          capacity=self.capacity_scaling(th))
+
+    def rhs(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
+        """f(theta, u; eta, p) in K/s (with the temperature-dependent capacity if configured)."""
+        return self.evaluate(theta, u, eta, p).rate
 
     def step(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
         """F(theta, u; eta, p) = theta + t_s f (eq. 12a)."""
-        th = np.asarray(theta, float)
-        return th + self.t_s * self.rhs(th, u, eta, p)
+        e = self.evaluate(theta, u, eta, p)
+        return e.theta + self.t_s * e.rate
 
     def radiation_jacobian(self, node: _Node, T: Array, emissivity: float = 0.0) -> Array:
         """t_s (A + p_e dA) diag(4 T^3) M_theta of one position (n, n): the radiation part of eq. (16)."""
@@ -200,52 +238,34 @@ class ParametricModel:
                   p: Parameters | None = None) -> Array:
         """dF/dtheta (n, n), eq. (16), at the position's weights (exact, no caching)."""
         pv = p or Parameters()
-        th = np.asarray(theta, float)
-        T = self.fe.field_on_cells(th).ravel()
+        e = self.evaluate(theta, np.zeros(self.m) if u is None else u, eta, pv)
         J = self.linear_jacobian(pv)
         for node, w in self.positions(eta):
-            J += w * self.radiation_jacobian(node, T, pv.emissivity)
-        return self.with_capacity(J, th, u, eta, pv)
+            J += w * self.radiation_jacobian(node, e.T, pv.emissivity)
+        return self.with_capacity(J, e)
 
-    def with_capacity(self, J: Array, theta: Array, u: ArrayLike | None, eta: float, p: Parameters) -> Array:
+    def with_capacity(self, J: Array, e: Evaluation) -> Array:
         """Phi of the constant-capacity model -> Phi with c_p(theta): I + D (Phi - I) + t_s diag(f dD/dtheta)."""
-        scaling = self.capacity_scaling(theta)
-        if scaling is None:
+        if e.capacity is None:
             return J
-        D, dD = scaling
-        f = self.rhs_constant_capacity(theta, np.zeros(self.m) if u is None else u, eta, p)
+        D, dD = e.capacity
         out = D[:, None] * J
-        out[np.diag_indices(self.n)] += (1.0 - D) + self.t_s * f * dD
+        out[np.diag_indices(self.n)] += (1.0 - D) + self.t_s * e.f * dD
         return np.asarray(out)
 
     def jac_p(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
         """dF/dp (n, len(calibrated)) for the calibrated parameters, in K per unit relative deviation."""
-        th = np.asarray(theta, float)
-        uv = np.asarray(u, float)
-        pv = p or Parameters()
-        t = self.tables
-        cols = []
-        T4 = None
-        for name in self.calibrated:
-            if name == "convection":
-                cols.append(self.t_s * (t.L_loss @ th + t.c_loss))
-                continue
-            col = np.zeros(self.n)
-            for node, w in self.positions(eta):
-                if name == "lamp_efficiency":
-                    Bu = node.B @ uv
-                    if pv.emissivity != 0.0 and node.dB is not None:
-                        Bu = Bu + pv.emissivity * (node.dB @ uv)
-                    col += w * Bu
-                else:  # emissivity
-                    if T4 is None:
-                        T = self.fe.field_on_cells(th).ravel()
-                        T4 = (T * T) ** 2
-                    assert node.dA is not None and node.dB is not None and node.dc is not None
-                    col += w * (node.dA @ T4 + (1.0 + pv.lamp_efficiency) * (node.dB @ uv) + node.dc)
-            cols.append(self.t_s * col)
-        if not cols:
+        return self.jac_p_of(self.evaluate(theta, u, eta, p))
+
+    def jac_p_of(self, e: Evaluation) -> Array:
+        """dF/dp from an :meth:`evaluate` result (the predict step shares it with F and Phi)."""
+        if not self.calibrated:
             return np.zeros((self.n, 0))
-        Jp = np.column_stack(cols)
-        scaling = self.capacity_scaling(th)
-        return Jp if scaling is None else scaling[0][:, None] * Jp
+        parts = {"lamp_efficiency": e.lamps, "convection": e.loss, "emissivity": e.emission}
+        cols = []
+        for name in self.calibrated:
+            col = parts[name]
+            assert col is not None  # the emission part exists when the emissivity is calibrated
+            cols.append(col)
+        Jp = self.t_s * np.column_stack(cols)
+        return Jp if e.capacity is None else e.capacity[0][:, None] * Jp

@@ -146,6 +146,8 @@ class ClosedLoop:
         self.shadow = None if spec.shadow is None else build_estimator(
             spec.shadow, self.tables, scenario.oscillation, cfg, theta0)
         self._replan_threshold = cfg.calibration.replan_threshold
+        self._replan_interval = cfg.calibration.replan_interval
+        self._last_calibration_t = -np.inf
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -243,13 +245,18 @@ class ClosedLoop:
         self._events.append(f"re-planned ({description}): {ctl.plan.status}")
 
     def _follow_calibration(self, t: float) -> None:
-        """Re-plan the controller when a calibrated parameter moved past the threshold since its plan."""
-        if not self.estimator.k or self._pending is not None:
+        """Re-plan the controller when a calibrated parameter is known well (sigma below the threshold) and
+        moved past the threshold since its plan, at most once per ``calibration.replan_interval``."""
+        est = self.estimator
+        if not est.k or self._pending is not None or t < self._last_calibration_t + self._replan_interval:
             return
-        p, planned = self.estimator.parameters.as_array(), self._ctl.parameters.as_array()
-        if float(np.max(np.abs(p - planned))) <= self._replan_threshold:
+        cal = est.calibration()
+        planned = self._ctl.parameters
+        if not any(v["sigma"] < self._replan_threshold
+                   and abs(v["value"] - getattr(planned, name)) > self._replan_threshold for name, v in cal.items()):
             return
-        now = ", ".join(f"{k} {100 * v['value']:+.1f} %" for k, v in self.estimator.calibration().items())
+        self._last_calibration_t = t
+        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})" for k, v in cal.items())
         self._start_replan(self._oscillation, f"calibration at t = {t:.1f} s: {now}")
 
     def _poll_pending(self) -> None:
