@@ -44,7 +44,6 @@ METRIC_KEYS = (
     "true_inhomogeneity_steady",
     "true_mean_error_steady_max",
     "field_estimation_error_steady_max",
-    "tc4_error_oscillation_amplitude",
 )
 #: the estimator outputs a shadow estimator records under ``shadow_<key>`` (twin.runs.record)
 SHADOW_OUTPUTS = ("T_mean_hat", "tc_hat", "field_hat")
@@ -94,12 +93,12 @@ def _mean(values: Array, sel: NDArray[np.bool_]) -> float:
     return float(np.mean(v)) if v.size else float("nan")
 
 
-def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
+def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     """The product.md metrics from a time-series mapping (the ``timeseries.npz`` layout).
 
     Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, x, y, L_s, W_s,
     t_E, setpoint`` and, for the ``true_*`` metrics, ``field_true``.  Windows without samples give
-    NaN (a run stopped early).
+    NaN (a run stopped early).  Oscillating, calibrating and shadowed runs get more keys (:func:`_extras`).
     """
     t = np.asarray(ts["t"], float)
     t_E = float(ts["t_E"])
@@ -125,11 +124,7 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
     else:  # no truth (a real furnace), or no samples
         sup_true = true_mean_err = est_err = np.full(tf.size, np.nan)
     trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")
-    period = _oscillation_period(ts)
-    osc_amp = (oscillation_amplitude(t[st], tc_err[st, 3], period)
-               if period is not None and t.size else float("nan"))
-
-    return {
+    out: dict[str, Any] = {
         "mean_error_transient_max": _max(mean_err, tr),
         "mean_error_steady_max": _max(mean_err, st),
         "tc123_error_max": _max(tc_err[:, :3].max(axis=1) if t.size else np.zeros(0), after),
@@ -140,14 +135,19 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
         "true_inhomogeneity_steady": _mean(sup_true, stf),
         "true_mean_error_steady_max": _max(true_mean_err, stf),
         "field_estimation_error_steady_max": _max(est_err, stf),
-        "tc4_error_oscillation_amplitude": osc_amp,
     }
+    return _extras(ts, out, t, st, tc_err)
 
 
-def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
-    """:func:`compute_metrics`, plus ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating
-    run) and ``shadow`` (the shadow estimator's metrics) when the run has them (product.md)."""
-    out: dict[str, Any] = dict(compute_metrics(ts))
+def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc_err: Array,
+            ) -> dict[str, Any]:
+    """The metrics a run has only in some configurations: ``tc4_error_oscillation_amplitude`` (an oscillating
+    run: the TC4 error's component at the oscillation frequency over the steady window, relative),
+    ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run) and ``shadow`` (the shadow
+    estimator's metrics)."""
+    period = _oscillation_period(ts)
+    if period is not None and t.size:
+        out["tc4_error_oscillation_amplitude"] = oscillation_amplitude(t[st], tc_err[st, 3], period)
     if "parameters" in ts and len(ts["parameters"]):
         values, sigma = np.asarray(ts["parameters"][-1], float), np.asarray(ts["parameter_sigma"][-1], float)
         out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
@@ -156,5 +156,5 @@ def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
         shadow = dict(ts)
         for k in SHADOW_OUTPUTS:
             shadow[k] = ts[f"shadow_{k}"]
-        out["shadow"] = compute_metrics(shadow)
+        out["shadow"] = {k: v for k, v in compute_metrics(shadow).items() if k != "calibration"}
     return out

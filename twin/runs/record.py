@@ -202,10 +202,10 @@ class RunRecord:
         return out
 
     def metrics(self) -> dict[str, Any]:
-        """The run metrics of product.md (:func:`twin.runs.metrics.run_metrics`)."""
-        from twin.runs.metrics import run_metrics
+        """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
+        from twin.runs.metrics import compute_metrics
 
-        return run_metrics(self.arrays())
+        return compute_metrics(self.arrays())
 
     def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> None:
         """Write :meth:`arrays` atomically (see :func:`save_arrays`)."""
