@@ -20,13 +20,23 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, files, furnace, health, runs, stream
-from backend.run_manager import LimitExceeded, RunManager, RunNotActive, RunNotFound, TooManyRuns
-from backend.run_worker import ChangeRejected, LoopFactory
+from backend.routes import dashboard, docs, files, furnace, health, runs, stream
+from backend.run_manager import (
+    InsufficientStorage,
+    LimitExceeded,
+    RunManager,
+    RunNotActive,
+    RunNotFound,
+    TooManyRuns,
+)
+from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
+from backend.security import SecurityMiddleware
 from backend.settings import Settings
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
@@ -39,6 +49,8 @@ ERRORS: dict[type[Exception], int] = {
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
+    ChangeCancelled: status.HTTP_409_CONFLICT,
+    InsufficientStorage: status.HTTP_507_INSUFFICIENT_STORAGE,
 }
 
 
@@ -69,14 +81,17 @@ def create_app(
         recover_interrupted(repo, settings.runs_dir)
         manager = RunManager(settings, cfg, repo, loop_factory, limits=limits,
                              event_loop=asyncio.get_running_loop())
+        await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
         app.state.manager = manager
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
             from backend.viser import FurnaceView
 
-            # always loopback: the 3D view has no token check, so it must not be reachable from the network
-            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port)
+            # always loopback; its gate checks Host and Origin, and with a token only windows that entered it act
+            scene = FurnaceView(manager, host="127.0.0.1", port=settings.viser_port, token=settings.api_token,
+                                allowed_hosts=tuple(settings.allowed_hosts),
+                                allowed_origins=tuple(settings.allowed_origins))
             scene.start()
             app.state.viser_url = scene.url
         app.state.viser = scene
@@ -94,10 +109,14 @@ def create_app(
         description="Live digital twin of the oscillating infrared annealing furnace "
         "(Jadachowski, Steinboeck, Kugi, CEP 78, 2018): runs, live stream, recordings.",
         lifespan=lifespan,
+        docs_url=None,  # backend/routes/docs.py: the same pages with their scripts from an installed package
+        redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, dashboard):
+    for module in (health, furnace, runs, files, stream, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
+    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

@@ -33,6 +33,7 @@ from backend.loop_factory import DefaultLoopFactory
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget
 from twin.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -75,7 +76,7 @@ def _attach(port: int, run_id: str, n_clients: int, seconds: float) -> list[list
 
 
 def _bare_rtf(cfg: FurnaceConfig, scenario: Scenario, factory: DefaultLoopFactory, sim_s: float) -> float:
-    loop: Any = factory(cfg, scenario)
+    loop: Any = factory(cfg, scenario, budget=PlanBudget())
     try:
         t0 = time.perf_counter()
         first = loop.step()

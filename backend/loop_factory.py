@@ -8,6 +8,7 @@ from typing import Any
 
 from backend.run_worker import LoopLike
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -21,14 +22,21 @@ class DefaultLoopFactory:
         self._radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
 
-    def radiation(self, cfg: FurnaceConfig) -> Any:
+    def radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
+        """The furnace's radiation model, loaded (or ray-traced) once; a run waiting for another caller's
+        computation stops waiting when its ``budget`` is cancelled (Stop while starting)."""
         from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
 
         key = cfg.digest()
-        with self._lock:
+        while not self._lock.acquire(timeout=0.1):
+            if budget is not None and budget.cancelled:
+                raise PlanCancelled("stopped while the radiation model was being computed")
+        try:
             if key not in self._radiation:
                 self._radiation[key] = radiation_model(cfg)
             return self._radiation[key]
+        finally:
+            self._lock.release()
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -57,9 +65,22 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario) -> LoopLike:
+    def check_plan(self, cfg: FurnaceConfig, scenario: Scenario, budget: PlanBudget) -> None:
+        """Raise ``twin.control.budget.PlanTooLarge`` (a ``ValueError``) if the run's first plan is estimated
+        beyond ``budget``'s time or memory, so ``POST /api/runs`` answers 422 that says why."""
+        from twin.control.reference import reference_trajectory
+        from twin.control.replan import plan_estimate
+        from twin.model.discrete import discrete_model
+
+        model = discrete_model(cfg, self.radiation(cfg), None)  # same size and cost as the averaged one
+        T0 = float(cfg.specimen.initial_temperature)
+        ref = reference_trajectory(scenario.reference, T0)
+        plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
+
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
         from twin.runs.loop import ClosedLoop
 
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg), background=True)
+        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg, budget), background=True,
+                                    budget=budget)
         return loop

@@ -1,6 +1,8 @@
-"""After a restart: runs that were going when the server died are marked ``interrupted``, and
-their metrics are recomputed from the last flushed ``timeseries.npz`` (``twin.runs.metrics``), so
-their data up to the crash stays readable and comparable."""
+"""After a restart: runs that were going when the server died are marked ``interrupted`` with an end
+time (when their folder was last written), their flushed time series consolidated into
+``timeseries.npz`` and their metrics recomputed from it (``twin.runs.metrics``), and their recording
+given the footer the crash left out (``backend.recording_repair``), so their data up to the crash
+stays readable and comparable."""
 
 from __future__ import annotations
 
@@ -8,10 +10,12 @@ import logging
 from pathlib import Path
 
 from backend.frames import json_safe
+from backend.recording_repair import repair_recording
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
 from twin.runs.metrics import compute_metrics
 from twin.runs.record import load_arrays
+from twin.runs.series_store import consolidate, has_parts
 
 log = logging.getLogger(__name__)
 
@@ -21,6 +25,17 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
     ids = repo.mark_interrupted()
     for run_id in ids:
         files = RunFiles(runs_dir / run_id)
+        last_write = max((p.stat().st_mtime for p in files.folder.rglob("*") if p.is_file()), default=None) \
+            if files.folder.is_dir() else None
+        if last_write is not None:
+            repo.set_ended_at(run_id, last_write)
+        if files.recording.is_file() and not repair_recording(files.recording):
+            log.warning("run %s: its recording could not be repaired", run_id)
+        if has_parts(files.folder):  # what was flushed before the crash, as one timeseries.npz
+            try:
+                consolidate(files.folder, files.timeseries)
+            except Exception as exc:
+                log.warning("run %s: cannot consolidate its time series: %s", run_id, exc)
         if not files.timeseries.is_file():
             continue
         try:

@@ -132,6 +132,15 @@ class RunRepository:
         cur = self._exec("SELECT * FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
         return [self._run(r) for r in cur.fetchall()]
 
+    def runs_created_before(self, cutoff: float) -> list[RunRow]:
+        cur = self._exec("SELECT * FROM runs WHERE created_at < ? ORDER BY created_at", (cutoff,))
+        return [self._run(r) for r in cur.fetchall()]
+
+    def delete_run(self, run_id: str) -> None:
+        """Remove a run and its changes (retention)."""
+        self._exec("DELETE FROM changes WHERE run_id=?", (run_id,))
+        self._exec("DELETE FROM runs WHERE id=?", (run_id,))
+
     def count_active(self) -> int:
         marks = ",".join("?" * len(ACTIVE_STATUSES))
         cur = self._exec(f"SELECT COUNT(*) FROM runs WHERE status IN ({marks})", ACTIVE_STATUSES)
@@ -144,11 +153,14 @@ class RunRepository:
         ids = [r[0] for r in cur.fetchall()]
         for run_id in ids:
             self._exec(
-                "UPDATE runs SET status='interrupted', "
+                "UPDATE runs SET status='interrupted', ended_at=COALESCE(ended_at, ?), "
                 "error=COALESCE(error, 'the server stopped while the run was going') WHERE id=?",
-                (run_id,),
+                (time.time(), run_id),
             )
         return ids
+
+    def set_ended_at(self, run_id: str, t: float) -> None:
+        self._exec("UPDATE runs SET ended_at=? WHERE id=?", (t, run_id))
 
     def add_change(self, run_id: str, kind: str, body: dict[str, Any]) -> int:
         cur = self._exec(

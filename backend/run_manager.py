@@ -32,7 +32,9 @@ from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
+from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
 from twin.scenario import OscillationSpec, Reference, Scenario, check
 
@@ -52,6 +54,10 @@ class RunNotActive(RuntimeError):
 
 class TooManyRuns(RuntimeError):
     """``max_concurrent_runs`` runs are already going (429)."""
+
+
+class InsufficientStorage(RuntimeError):
+    """The data directory's quota or the disk's free space has no room for the run (507)."""
 
 
 class LimitExceeded(ValueError):
@@ -125,6 +131,8 @@ class RunManager:
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
         self._shutting_down = False
+        #: the data directory's usage, quota, free space and retention (backend.storage)
+        self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
     def files(self, run_id: str) -> RunFiles:
         return RunFiles(self.settings.runs_dir / run_id)
@@ -155,17 +163,31 @@ class RunManager:
                 await asyncio.to_thread(check, self.cfg, scenario.reference)
             except ValueError as exc:
                 raise LimitExceeded(f"reference: {exc}") from None
+        check_plan = getattr(self.loop_factory, "check_plan", None)
+        if callable(check_plan):  # the first plan within this server's time and memory (twin.control.budget)
+            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
+            try:
+                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
+            except ValueError as exc:
+                raise LimitExceeded(f"reference: {exc}") from None
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
+        await asyncio.to_thread(self.disk.apply_retention, self._repo, self.settings.runs_dir)
+        need = run_bytes(self.cfg, scenario.duration, self.settings.recording_image_interval_s)
+        need += sum(run_bytes(self.cfg, a.worker.scenario.duration) for a in self._runs.values())  # still to come
+        problem = await asyncio.to_thread(self.disk.room_for, need)
+        if problem is not None:
+            raise InsufficientStorage(problem)
         self._loop = asyncio.get_running_loop()
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
         files.folder.mkdir(parents=True, exist_ok=True)
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
-        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory)
+        worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
+                           disk=self.disk)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
@@ -242,6 +264,9 @@ class RunManager:
             final = "interrupted"
             error = "the server shut down during the run"
             raise
+        except PlanCancelled:  # stopped (or shut down) while the first plan was being made
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down during the run" if self._shutting_down else None
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"
@@ -281,7 +306,9 @@ class RunManager:
         run.wake.set()
 
     async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until the worker re-planned.
+        """Queue a reference / oscillation change; wait (bounded) until it is in force (``applied``), a later
+        change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in the
+        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`.
 
         A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
         run = self._active(run_id)

@@ -13,6 +13,11 @@ class Health(BaseModel):
     max_concurrent_runs: int
     viser_url: str | None = Field(None, description="the 3D view, when it runs")
     auth_required: bool = Field(description="mutating endpoints need the API token")
+    disk: dict[str, Any] = Field(default_factory=dict,
+                                 description="data directory: used_mb, free_mb (its disk), quota_mb, min_free_mb, "
+                                             "retention_days")
+    reads_need_token: bool = Field(False, description="every /api read and the stream need the token too "
+                                                      "(the server listens beyond loopback)")
 
 
 class RunLinks(BaseModel):
@@ -34,7 +39,8 @@ class ChangeOut(BaseModel):
     kind: str = Field(description="'reference' or 'oscillation'")
     body: dict[str, Any]
     requested_at: float = Field(description="unix s")
-    status: str = Field(description="pending, applied, rejected, failed or cancelled")
+    status: str = Field(description="pending, applied, superseded (a later change of its kind won before it "
+                                    "was planned), rejected or failed (not applied), or cancelled (the run ended)")
     applied_t: float | None = Field(None, description="simulated time of the first sample that uses it (s)")
     message: str | None = None
 
@@ -42,10 +48,13 @@ class ChangeOut(BaseModel):
 class ChangeResult(BaseModel):
     id: int
     kind: str
-    status: str = Field(description="'applied', or 'pending' if the re-plan outlasted the wait")
+    status: str = Field(description="'applied' (in force from applied_t), 'superseded' (a later change of its "
+                                    "kind won), or 'pending' (202: the re-plan outlasted the wait; the outcome "
+                                    "comes in the stream's events and GET /api/runs/{id})")
     body: dict[str, Any]
     applied_t: float | None = None
-    replan_s: float | None = Field(None, description="wall time of the re-plan (s)")
+    replan_s: float | None = Field(None, description="wall time from hand-over to the plan in force (s)")
+    message: str | None = None
 
 
 class RunSummary(BaseModel):

@@ -7,27 +7,19 @@ ray-traced once and cached) in the background at start, so the first run starts 
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import threading
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from backend.app import create_app
 from backend.loop_factory import DefaultLoopFactory
-from backend.settings import DEFAULT_DATA_DIR, Settings
+from backend.settings import DEFAULT_DATA_DIR, Settings, is_loopback
 from twin.config import FurnaceConfig
 from twin.limits import furnace_name
 
 log = logging.getLogger(__name__)
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def serve(
@@ -47,9 +39,14 @@ def serve(
     """
     import uvicorn
 
-    settings = Settings(  # type: ignore[call-arg]  # the rest from defaults / environment
-        data_dir=Path(data_dir) if data_dir else DEFAULT_DATA_DIR, host=host, port=port, viser_port=viser_port
-    )
+    try:
+        settings = Settings(  # type: ignore[call-arg]  # the rest from defaults / environment
+            data_dir=Path(data_dir) if data_dir else DEFAULT_DATA_DIR, host=host, port=port, viser_port=viser_port
+        )
+    except ValidationError as exc:
+        log.error("invalid server settings (FURNACE_TWIN_...): %s", "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()))
+        return 2
     if not is_loopback(host) and not settings.api_token:
         log.error("refusing to listen on %s without an API token: set FURNACE_TWIN_API_TOKEN "
                   "(or keep the default 127.0.0.1)", host)

@@ -7,12 +7,25 @@ data directory explicitly.  The defaults bind to loopback only.
 
 from __future__ import annotations
 
+import ipaddress
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 DEFAULT_DATA_DIR = Path("furnace-data")
+#: shortest API token accepted (characters): 16 random characters are beyond guessing over HTTP
+MIN_TOKEN_LENGTH = 16
+
+
+def is_loopback(host: str) -> bool:
+    """``localhost`` or a loopback address (127.0.0.0/8, ::1)."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 class Settings(BaseSettings):
@@ -24,7 +37,24 @@ class Settings(BaseSettings):
     host: str = Field("127.0.0.1", description="REST / dashboard bind address (loopback by default)")
     port: int = Field(8000, ge=0, le=65535)
     viser_port: int = Field(8080, ge=0, le=65535, description="viser 3D view; 0 disables it")
-    api_token: str | None = Field(None, description="when set, every mutating endpoint needs it")
+    api_token: str | None = Field(None, description="when set, every mutating endpoint needs it (and every read "
+                                                    f"when the server listens beyond loopback); at least "
+                                                    f"{MIN_TOKEN_LENGTH} characters")
+    allowed_hosts: list[str] = Field(default_factory=list,
+                                     description="Host names besides loopback (and the bind address) the server "
+                                                 "answers to, e.g. '[\"furnace.lab\"]': guards against DNS rebinding")
+    allowed_origins: list[str] = Field(default_factory=list,
+                                       description="origins besides the server's own allowed to change runs "
+                                                   "(e.g. '[\"https://proxy.lab\"]')")
+    max_body_bytes: int = Field(1 << 20, ge=1024, description="largest request body (bytes); larger -> 413")
+    plan_max_s: float = Field(120.0, gt=0, description="wall time a feedforward plan (start or re-plan) may take (s)")
+    plan_max_mb: float = Field(1024.0, gt=0, description="memory a feedforward plan may take (MB, estimated "
+                                                         "before solving); more -> 422")
+    data_quota_mb: float = Field(10240.0, gt=0, description="most the data directory may hold (MB); a run that "
+                                                            "would pass it is refused, one that passes it stops")
+    min_free_mb: float = Field(512.0, ge=0, description="free disk space (MB) kept on the data directory's disk")
+    retention_days: float | None = Field(None, gt=0, description="ended runs older than this are deleted "
+                                                                 "(None: kept)")
     max_concurrent_runs: int = Field(2, ge=1, le=64, description="running runs at once; more -> 429")
     max_duration_s: float = Field(3600.0, gt=0, description="longest simulated run accepted (s)")
     max_speed: float = Field(1000.0, gt=0, description="largest real-time factor accepted")
@@ -34,6 +64,20 @@ class Settings(BaseSettings):
     flush_interval_s: float = Field(2.0, gt=0, description="timeseries / database / recording flush (wall s)")
     recording_image_interval_s: float = Field(0.5, gt=0, description="simulated s between field images in the .rrd")
     change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")
+
+    @field_validator("api_token")
+    @classmethod
+    def _token_length(cls, v: str | None) -> str | None:
+        if not v:  # FURNACE_TWIN_API_TOKEN= (empty): no token
+            return None
+        if len(v) < MIN_TOKEN_LENGTH:
+            raise ValueError(f"the API token must have at least {MIN_TOKEN_LENGTH} characters, got {len(v)}")
+        return v or None
+
+    @property
+    def reads_need_token(self) -> bool:
+        """With a token and a non-loopback address, reads (GET, the stream) need the token too."""
+        return bool(self.api_token) and not is_loopback(self.host)
 
     @property
     def db_path(self) -> Path:

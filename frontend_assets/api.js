@@ -38,7 +38,7 @@ function formatDetail(detail) {
 
 export async function api(method, path, body) {
   const headers = { "Content-Type": "application/json" };
-  if (method !== "GET" && token()) headers["X-API-Token"] = token();
+  if (token()) headers["X-API-Token"] = token(); // reads need it too when the server listens beyond loopback
   let r;
   try {
     r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });

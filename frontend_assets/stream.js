@@ -1,4 +1,5 @@
 // The picked run's websocket stream (WS /api/runs/{id}/stream): frames into the series, events into the log.
+import { token } from "./api.js";
 import { addEvent, noteStatus } from "./events.js";
 import { $, badge, fmt, LIVE } from "./page.js";
 import { pushFrame } from "./series.js";
@@ -12,7 +13,9 @@ export function closeStream() {
 export function connectStream(runId, onEnd) {
   closeStream();
   const proto = location.protocol === "https:" ? "wss" : "ws";
-  const ws = new WebSocket(`${proto}://${location.host}/api/runs/${runId}/stream`);
+  // a browser cannot set headers on a websocket: the token rides as a subprotocol (never in the URL)
+  const protocols = token() ? ["furnace-twin", `token.${token()}`] : [];
+  const ws = new WebSocket(`${proto}://${location.host}/api/runs/${runId}/stream`, protocols);
   state.ws = ws;
   ws.onmessage = (ev) => {
     const f = JSON.parse(ev.data);

@@ -33,6 +33,7 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    Strict,
     Tag,
     TypeAdapter,
     ValidationInfo,
@@ -66,15 +67,21 @@ def _check(r: lim.Range, value: float) -> float:
     return value
 
 
+#: A JSON number: an int or a float, never a bool or a string ("speed": true is not 1.0), never NaN or
+#: +-Infinity (the models below refuse non-finite floats: a JSON body with NaN, Infinity or 1e999 is a 422)
+Num = Annotated[float, Strict()]
+Int = Annotated[int, Strict()]
+
+
 class _Model(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
 
 class TransitionReference(_Model):
     """The paper's reference: C1 polynomial transition from the initial mean to ``setpoint`` over ``t_E``."""
 
-    setpoint: float = Field(_DEFAULT.setpoint.default, description="T_ref(t_E) in K; range: GET /api/furnace")
-    t_E: float = Field(lim.T_E.default, gt=lim.T_E.lo, le=lim.T_E.hi, description="transition time in s")
+    setpoint: Num = Field(_DEFAULT.setpoint.default, description="T_ref(t_E) in K; range: GET /api/furnace")
+    t_E: Num = Field(lim.T_E.default, gt=lim.T_E.lo, le=lim.T_E.hi, description="transition time in s")
 
     @model_validator(mode="before")
     @classmethod
@@ -93,7 +100,8 @@ class TransitionReference(_Model):
 class PointsReference(_Model):
     """User-given (time s, temperature K) points, joined C1 (monotone cubic); constant after the last."""
 
-    points: list[tuple[float, float]] = Field(min_length=1)
+    points: list[tuple[Num, Num]] = Field(min_length=1, max_length=lim.MAX_REFERENCE_POINTS,
+                                          description=f"(t s, T K), at most {lim.MAX_REFERENCE_POINTS}")
 
     @field_validator("points")
     @classmethod
@@ -138,10 +146,10 @@ class OscillationSpec(_Model):
     """eta(t) = amplitude sin(2 pi t / period) (paper section 5.2: 3 L_h sin(2 pi t / Pi), Pi = 0.15 t_E)."""
 
     enabled: bool = False
-    amplitude: float = Field(_DEFAULT.amplitude.default, ge=0.0,
+    amplitude: Num = Field(_DEFAULT.amplitude.default, ge=0.0,
                              description="m; at most the furnace's eta_max, default 3 L_h capped at it "
                                          "(GET /api/furnace)")
-    period: float = Field(lim.PERIOD.default, ge=lim.PERIOD.lo, le=lim.PERIOD.hi, description="s")
+    period: Num = Field(lim.PERIOD.default, ge=lim.PERIOD.lo, le=lim.PERIOD.hi, description="s")
 
     @model_validator(mode="before")
     @classmethod
@@ -160,9 +168,9 @@ class OscillationSpec(_Model):
 class Mismatch(_Model):
     """Relative deviations of the plant from the model (0.05 = plant 5 % higher)."""
 
-    emissivity: float = Field(0.0, ge=lim.MISMATCH_EMISSIVITY.lo, le=lim.MISMATCH_EMISSIVITY.hi)
-    alpha: float = Field(0.0, ge=lim.MISMATCH_ALPHA.lo, le=lim.MISMATCH_ALPHA.hi)
-    lamp_efficiency: float = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
+    emissivity: Num = Field(0.0, ge=lim.MISMATCH_EMISSIVITY.lo, le=lim.MISMATCH_EMISSIVITY.hi)
+    alpha: Num = Field(0.0, ge=lim.MISMATCH_ALPHA.lo, le=lim.MISMATCH_ALPHA.hi)
+    lamp_efficiency: Num = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
 
 
 class EstimatorChoice(_Model):
@@ -189,14 +197,14 @@ class EstimatorSpec(EstimatorChoice):
 
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
-    duration: float = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
+    duration: Num = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
     oscillation: OscillationSpec = Field(default_factory=OscillationSpec)
-    tc4: tuple[float, float] = Field(_DEFAULT.tc4, description="relative (x / L_s, y / W_s)")
-    speed: Literal["max"] | float = Field(lim.SPEED.default, description="'max' or a real-time factor")
+    tc4: tuple[Num, Num] = Field(_DEFAULT.tc4, description="relative (x / L_s, y / W_s)")
+    speed: Literal["max"] | Num = Field(lim.SPEED.default, description="'max' or a real-time factor")
     mismatch: Mismatch = Field(default_factory=Mismatch)
-    tc_noise: float = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
+    tc_noise: Num = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
-    seed: int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
+    seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
     estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
 
     @model_validator(mode="before")

@@ -7,9 +7,11 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
 
 from backend.deps import ManagerDep
 from backend.series import load_series
+from twin.runs.series_store import has_parts, snapshot_file
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
 
@@ -18,6 +20,8 @@ def _file(run_id: str, manager: ManagerDep, which: str) -> Path:
     manager.run(run_id)  # 404 unless the id comes from the database, before it names a folder
     files = manager.files(run_id)
     path: Path = getattr(files, which)
+    if which == "timeseries" and has_parts(files.folder):  # a run in progress: its parts so far, as one file
+        return snapshot_file(files.folder, path)
     if not path.is_file():
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {path.name} (yet)")
     return path
@@ -38,7 +42,9 @@ def recording(run_id: str, manager: ManagerDep) -> FileResponse:
 def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
     """The raw time series (``.npz``, layout in product.md), flushed every few seconds while running."""
     path = _file(run_id, manager, "timeseries")
-    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz")
+    cleanup = BackgroundTask(path.unlink, missing_ok=True) if path.name.startswith(".timeseries-") else None
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-timeseries.npz",
+                        background=cleanup)
 
 
 @router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
@@ -50,3 +56,6 @@ def series(run_id: str, manager: ManagerDep,
         return load_series(path, max_points)
     except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read {path.name}: {exc}") from None
+    finally:
+        if path.name.startswith(".timeseries-"):
+            path.unlink(missing_ok=True)

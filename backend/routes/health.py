@@ -18,4 +18,6 @@ def health(manager: ManagerDep, settings: SettingsDep, request: Request) -> Heal
         max_concurrent_runs=settings.max_concurrent_runs,
         viser_url=getattr(request.app.state, "viser_url", None),
         auth_required=bool(settings.api_token),
+        reads_need_token=settings.reads_need_token,
+        disk=manager.disk.report(),
     )

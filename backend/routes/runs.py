@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Query, status
+from fastapi import APIRouter, HTTPException, Query, Response, status
 
 from backend.deps import ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
 from backend.repository import RunRow
@@ -20,14 +20,24 @@ def links(run_id: str) -> RunLinks:
                     recording=f"{base}/recording", timeseries=f"{base}/timeseries")
 
 
-def summary(row: RunRow, manager: RunManager) -> RunSummary:
+def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
+    """A scenario for lists: a points reference as its count, last time and last temperature (a list of
+    runs stays small however long their point lists are; ``GET /api/runs/{id}`` has the whole scenario)."""
+    ref = scenario.get("reference") or {}
+    pts = ref.get("points")
+    if not isinstance(pts, list) or not pts:
+        return scenario
+    return {**scenario, "reference": {"points": len(pts), "t_E": pts[-1][0], "setpoint": pts[-1][1]}}
+
+
+def summary(row: RunRow, manager: RunManager, *, whole: bool = True) -> RunSummary:
     return RunSummary(
         id=row.id,
         status=manager.status(row.id) or row.status,
         created_at=row.created_at,
         started_at=row.started_at,
         ended_at=row.ended_at,
-        scenario=row.scenario,
+        scenario=row.scenario if whole else scenario_summary(row.scenario),
         latest=row.latest,
         metrics=row.metrics,
         error=row.error,
@@ -47,8 +57,8 @@ async def start_run(manager: ManagerDep, scenario: ScenarioBody) -> RunCreated:
 
 @router.get("", response_model=list[RunSummary])
 def list_runs(manager: ManagerDep, limit: Annotated[int, Query(ge=1, le=1000)] = 200) -> list[RunSummary]:
-    """All runs, newest first."""
-    return [summary(r, manager) for r in manager.runs(limit)]
+    """All runs, newest first; a points reference is summarised as ``{"points": count, "t_E", "setpoint"}``."""
+    return [summary(r, manager, whole=False) for r in manager.runs(limit)]
 
 
 @router.get("/{run_id}", response_model=RunDetail, responses={404: {"description": "no such run"}})
@@ -77,27 +87,45 @@ def stop_run(run_id: str, manager: ManagerDep) -> StopResult:
     return StopResult(id=run_id, status="stopping")
 
 
+CHANGE_RESPONSES: dict[int | str, dict[str, Any]] = {
+    202: {"model": ChangeResult, "description": "still being planned: the outcome comes in the events"},
+    404: {"description": "no such run"}, 409: {"description": "the run has ended (or ended before the change)"},
+}
+
+
+def _change_result(result: dict[str, Any], response: Response) -> ChangeResult:
+    if result["status"] == "pending":
+        response.status_code = status.HTTP_202_ACCEPTED
+    return ChangeResult(**result)
+
+
 @router.put("/{run_id}/reference", response_model=ChangeResult, dependencies=[TokenDep],
-            responses={404: {"description": "no such run"}, 409: {"description": "the run has ended"},
-                       422: {"description": "invalid or unreachable reference"}})
-async def change_reference(run_id: str, manager: ManagerDep, reference: ReferenceBody) -> ChangeResult:
+            responses={**CHANGE_RESPONSES,
+                       422: {"description": "invalid or unreachable reference, a plan beyond the server's time "
+                                            "or memory, or a failed re-plan (nothing applied)"}})
+async def change_reference(run_id: str, manager: ManagerDep, reference: ReferenceBody,
+                           response: Response) -> ChangeResult:
     """New reference (setpoint and t_E, or points); the feedforward is re-planned from the estimate.
 
-    Applied at the next sample; the response comes when the re-plan is done (status
-    'applied'), or after the server's wait limit with status 'pending'.
+    The answer comes when the new plan is in force (status 'applied', from ``applied_t``), when a later
+    reference change replaced this one before it was planned ('superseded'), or, after the server's wait
+    limit, as 202 'pending' (the outcome then comes in the events).  A change that cannot be planned
+    is a 422 that says why; the run goes on with what it had.
     """
     manager.run(run_id)
-    return ChangeResult(**await manager.change(run_id, "reference", reference))
+    return _change_result(await manager.change(run_id, "reference", reference), response)
 
 
 @router.put("/{run_id}/oscillation", response_model=ChangeResult, dependencies=[TokenDep],
-            responses={404: {"description": "no such run"}, 409: {"description": "the run has ended"},
-                       422: {"description": "invalid, or an amplitude above the furnace's eta_max"}})
-async def change_oscillation(run_id: str, manager: ManagerDep, oscillation: OscillationBody) -> ChangeResult:
+            responses={**CHANGE_RESPONSES,
+                       422: {"description": "invalid, an amplitude above the furnace's eta_max, or a re-plan "
+                                            "that cannot be made (nothing applied)"}})
+async def change_oscillation(run_id: str, manager: ManagerDep, oscillation: OscillationBody,
+                             response: Response) -> ChangeResult:
     """Switch the oscillation on or off (and its amplitude, period); models and gains switch.
     A field left out takes the furnace's default (``GET /api/furnace``), not the run's current value."""
     manager.run(run_id)
-    return ChangeResult(**await manager.change(run_id, "oscillation", oscillation))
+    return _change_result(await manager.change(run_id, "oscillation", oscillation), response)
 
 
 @router.get("/{run_id}/metrics", response_model=dict[str, Any],

@@ -10,6 +10,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from fastapi.responses import PlainTextResponse
 
 from backend.run_manager import RunManager, RunNotFound
+from backend.security import STREAM_SUBPROTOCOL, TOKEN_SUBPROTOCOL
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/runs", tags=["stream"])
@@ -32,7 +33,10 @@ async def stream(ws: WebSocket, run_id: str) -> None:
         await _deny(ws, 404, str(exc))
         return
     hub = manager.hub(run_id)
-    await ws.accept()
+    # a browser sends its token as a subprotocol (backend.security); answer with ours, never the token
+    offered = ws.scope.get("subprotocols") or []
+    await ws.accept(subprotocol=STREAM_SUBPROTOCOL if STREAM_SUBPROTOCOL in offered or any(
+        p.startswith(TOKEN_SUBPROTOCOL) for p in offered) else None)
     if hub is None:
         last = manager.last_frame(run_id)
         if last is not None:

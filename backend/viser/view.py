@@ -5,7 +5,9 @@ newest active run; a running run is followed live; a finished (stopped, interrup
 shows its last estimated field from its ``timeseries.npz``.  The live controls act on the shown
 run only while it runs.
 
-The view runs on viser's own thread and port (always 127.0.0.1: it has no token check); a daemon
+The view runs on viser's own thread and port (always 127.0.0.1), behind the gate of
+``backend.viser.gate``: loopback Host, its own Origin, and with an API token set only a window that
+entered it may act (the others are read-only; every control is checked here, on the server).  A daemon
 thread reads the shown run's latest sample at <= ``UPDATE_HZ`` and updates the scene, so it never
 slows a run.  Everything about the runs comes from the run manager's public methods; GUI
 callbacks hand their work to the server's event loop (``RunManager.call_from_thread``), the same
@@ -26,6 +28,7 @@ from backend.frames import SnapshotLike
 from backend.repository import ACTIVE_STATUSES, RunRow
 from backend.run_manager import RunManager
 from backend.viser.controls import AUTO, Controls, build_controls
+from backend.viser.gate import ClientAccess, guarded_viser_server
 from backend.viser.scene import FurnaceScene
 from backend.viser.stored import stored_snapshot
 from twin.scenario import parse_oscillation, parse_reference, parse_scenario
@@ -61,8 +64,12 @@ def status_text(snap: SnapshotLike, run_id: str, status: str) -> str:
 class FurnaceView:
     """The viser server, its scene and panel, and the run they show."""
 
-    def __init__(self, manager: RunManager, *, host: str = "127.0.0.1", port: int = 8080):
+    def __init__(self, manager: RunManager, *, host: str = "127.0.0.1", port: int = 8080,
+                 token: str | None = None, allowed_hosts: tuple[str, ...] = (),
+                 allowed_origins: tuple[str, ...] = ()):
         self.manager = manager
+        self.access = ClientAccess(token)
+        self._allowed_hosts, self._allowed_origins = allowed_hosts, allowed_origins
         self.cfg = manager.cfg
         self.host = host
         self.port = port
@@ -84,8 +91,10 @@ class FurnaceView:
 
     # ------------------------------------------------------------------ set-up
     def start(self) -> None:
-        self.server = viser.ViserServer(host=self.host, port=self.port, label="furnace-twin", verbose=False)
+        self.server = guarded_viser_server(self.host, self.port, allowed_hosts=self._allowed_hosts,
+                                           allowed_origins=self._allowed_origins)
         self.port = self.server.get_port()
+        self.access.attach(self.server)
         self.scene = FurnaceScene(self.server, self.cfg)
         self.gui = build_controls(self.server.gui, self.manager.limits)
         self._wire(self.gui)
@@ -109,12 +118,18 @@ class FurnaceView:
             self._last_seq, self._static_key = -1, None  # redraw for the new choice
 
         @g.start.on_click
-        def _(_: Any) -> None:
-            speed: str | float = g.speed.value if g.speed.value == "max" else float(g.speed.value)
+        def _(event: Any) -> None:
+            if not self._may_act(event):
+                return
+            try:
+                speed: str | float = g.speed.value if g.speed.value == "max" else float(g.speed.value)
+            except (TypeError, ValueError):
+                return g.say(f"**refused:** speed {g.speed.value!r} is not 'max' or a number")
             body = {"reference": {"setpoint": g.setpoint.value, "t_E": g.t_E.value},
                     "duration": g.duration.value, "speed": speed,
                     "oscillation": {"enabled": g.oscillate.value, "amplitude": g.amplitude.value,
                                     "period": g.period.value}}
+            # the values come from a browser, which can send anything: the same checks as POST /api/runs
             run_id = self._call(lambda: self.manager.start(parse_scenario(body, self.manager.limits)))
             if run_id is not None:
                 g.say(f"started run `{run_id}`")
@@ -122,7 +137,9 @@ class FurnaceView:
                 self.pick(run_id)
 
         @g.change_reference.on_click
-        def _(_: Any) -> None:
+        def _(event: Any) -> None:
+            if not self._may_act(event):
+                return
             if (run_id := self._followed()) is None:
                 return g.say(self._not_running())
             body = {"setpoint": g.new_setpoint.value, "t_E": g.new_t_E.value}
@@ -133,7 +150,9 @@ class FurnaceView:
                 g.say(f"reference {body['setpoint']:g} K over {body['t_E']:g} s: {r['status']}")
 
         @g.toggle_oscillation.on_click
-        def _(_: Any) -> None:
+        def _(event: Any) -> None:
+            if not self._may_act(event):
+                return
             if (run_id := self._followed()) is None:
                 return g.say(self._not_running())
             now = self.manager.in_force(run_id).oscillation
@@ -144,7 +163,9 @@ class FurnaceView:
                 g.say(f"oscillation {'on' if body['enabled'] else 'off'}: {r['status']}")
 
         @g.stop.on_click
-        def _(_: Any) -> None:
+        def _(event: Any) -> None:
+            if not self._may_act(event):
+                return
             if (run_id := self._followed()) is None:
                 return g.say(self._not_running())
             try:
@@ -157,6 +178,14 @@ class FurnaceView:
         def _(_: Any) -> None:
             assert self.scene is not None
             self.scene.show_housing(g.show_housing.value)
+
+    def _may_act(self, event: Any) -> bool:
+        """Whether the client behind a GUI event may start, change or stop runs (``ClientAccess``)."""
+        assert self.gui is not None
+        if self.access.may_act(int(event.client_id)):
+            return True
+        self.gui.say("**read-only:** this server has an API token: enter it under **Access** to act")
+        return False
 
     def _call(self, make: Any) -> Any:
         """Build a manager coroutine (``make()``, which may refuse its input) and run it on the server's

@@ -132,7 +132,7 @@ class FakeFactory:
     def __init__(self, step_cost_s: float = 0.0, replan_s: float = 0.0) -> None:
         self.step_cost_s, self.replan_s = step_cost_s, replan_s
 
-    def __call__(self, cfg: Any, scenario: Any) -> FakeLoop:
+    def __call__(self, cfg: Any, scenario: Any, *, budget: Any = None) -> FakeLoop:
         return FakeLoop(cfg, scenario, step_cost_s=self.step_cost_s, replan_s=self.replan_s)
 
     def check_reference(self, cfg: Any, ref: Any) -> None:
@@ -200,7 +200,7 @@ def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float = 120.0)
 def stream_frames(c: Any, run_id: str, on_frame=None) -> list[dict]:
     """Every frame of the run's stream until it closes; ``on_frame(frame)`` may act on the run."""
     frames = []
-    with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+    with c.websocket_connect(f"ws://127.0.0.1/api/runs/{run_id}/stream") as ws:
         while True:
             try:
                 f = json.loads(ws.receive_text())

@@ -18,10 +18,12 @@ from backend.app import create_app
 from backend.settings import Settings
 from conftest import fake_factory, stream_frames, wait_status
 
+TOKEN = "s3cret-token-0123456"  # at least backend.settings.MIN_TOKEN_LENGTH characters
+
 
 def make_client(tmp_path: Path, cfg, factory=None, **settings) -> TestClient:
     s = Settings(data_dir=tmp_path / "data", **settings)
-    return TestClient(create_app(s, cfg, loop_factory=factory or fake_factory()))
+    return TestClient(create_app(s, cfg, loop_factory=factory or fake_factory()), base_url="http://127.0.0.1")
 
 
 def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:
@@ -72,7 +74,7 @@ def test_lifecycle_with_changes_visible_in_frames(tmp_path, small_cfg) -> None:
         assert c.post(f"/api/runs/{run_id}/stop").status_code == 409
         assert c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": False}).status_code == 409
         # a client of an ended run gets its last frame, then the stream closes
-        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+        with c.websocket_connect(f"ws://127.0.0.1/api/runs/{run_id}/stream") as ws:
             last = json.loads(ws.receive_text())
             assert last["status"] == "finished" and last["t"] == pytest.approx(6.0)
             from starlette.websockets import WebSocketDisconnect
@@ -111,7 +113,7 @@ def test_404s(tmp_path, small_cfg) -> None:
         from starlette.testclient import WebSocketDenialResponse
 
         with pytest.raises(WebSocketDenialResponse) as exc:
-            with c.websocket_connect("/api/runs/abc123/stream"):
+            with c.websocket_connect("ws://127.0.0.1/api/runs/abc123/stream"):
                 pass
         assert exc.value.status_code == 404
 
@@ -160,19 +162,19 @@ def test_429_past_concurrent_runs(tmp_path, small_cfg) -> None:
 
 
 def test_token_guards_every_mutating_endpoint(tmp_path, small_cfg) -> None:
-    with make_client(tmp_path, small_cfg, api_token="s3cret") as c:
+    with make_client(tmp_path, small_cfg, api_token=TOKEN) as c:
         assert c.get("/api/health").json()["auth_required"] is True
         assert c.post("/api/runs", json={"duration": 1.0}).status_code == 401
         assert c.post("/api/runs", json={"duration": 1.0}, headers={"X-API-Token": "nope"}).status_code == 401
         ok = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0},
-                    headers={"Authorization": "Bearer s3cret"})
+                    headers={"Authorization": f"Bearer {TOKEN}"})
         assert ok.status_code == 201
         run_id = ok.json()["id"]
         assert c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1000.0}).status_code == 401
         assert c.put(f"/api/runs/{run_id}/oscillation", json={"enabled": True}).status_code == 401
         assert c.post(f"/api/runs/{run_id}/stop").status_code == 401
         assert c.get(f"/api/runs/{run_id}").status_code == 200  # reading needs no token
-        assert c.post(f"/api/runs/{run_id}/stop", headers={"X-API-Token": "s3cret"}).status_code == 202
+        assert c.post(f"/api/runs/{run_id}/stop", headers={"X-API-Token": TOKEN}).status_code == 202
 
 
 def test_dashboard_and_plotly_are_served_locally(tmp_path, small_cfg) -> None:
@@ -193,7 +195,7 @@ def test_real_time_factor_paces_the_samples(tmp_path, small_cfg) -> None:
     with make_client(tmp_path, small_cfg) as c:
         run_id = c.post("/api/runs", json={"duration": 4.0, "speed": 2.0}).json()["id"]
         frames = []
-        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+        with c.websocket_connect(f"ws://127.0.0.1/api/runs/{run_id}/stream") as ws:
             while True:
                 try:
                     frames.append(json.loads(ws.receive_text()))
@@ -273,20 +275,20 @@ def test_bad_points_get_422_that_says_why(tmp_path, small_cfg) -> None:
 
 def test_points_need_the_token_too(tmp_path, small_cfg) -> None:
     ref = {"points": [[5.0, 900.0]]}
-    with make_client(tmp_path, small_cfg, api_token="s3cret") as c:
+    with make_client(tmp_path, small_cfg, api_token=TOKEN) as c:
         r = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0, "reference": ref})
         assert r.status_code == 401 and "token" in r.json()["detail"]
         assert r.headers["www-authenticate"] == "Bearer"
         ok = c.post("/api/runs", json={"duration": 60.0, "speed": 1.0, "reference": ref},
-                    headers={"X-API-Token": "s3cret"})
+                    headers={"X-API-Token": TOKEN})
         assert ok.status_code == 201, ok.text
         run_id = ok.json()["id"]
         wait_status(c, run_id, {"running"})
         assert c.put(f"/api/runs/{run_id}/reference", json=ref).status_code == 401
         assert c.put(f"/api/runs/{run_id}/reference", json=ref, headers={"X-API-Token": "wrong"}).status_code == 401
-        r = c.put(f"/api/runs/{run_id}/reference", json=ref, headers={"X-API-Token": "s3cret"})
+        r = c.put(f"/api/runs/{run_id}/reference", json=ref, headers={"X-API-Token": TOKEN})
         assert r.status_code == 200 and r.json()["status"] == "applied"
-        assert c.post(f"/api/runs/{run_id}/stop", headers={"Authorization": "Bearer s3cret"}).status_code == 202
+        assert c.post(f"/api/runs/{run_id}/stop", headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 202
 
 
 def test_events_reach_the_stream_at_max_speed(tmp_path, small_cfg) -> None:

@@ -193,7 +193,7 @@ def test_viser_follows_a_run_then_stop_from_dashboard(server, browser, artifacts
 def test_dashboard_asks_for_the_token(browser, tmp_path, small_cfg, artifacts) -> None:
     """With FURNACE_TWIN_API_TOKEN set the dashboard shows a token field; a start without it gets a
     message that says where to enter it; the token is kept for the tab only (never in the URL)."""
-    s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token="s3cret-token")
+    s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token="s3cret-token-0123456")
     with ThreadedServer(create_app(s, small_cfg, loop_factory=fake_factory()), free_port()) as srv:
         page, errors = _open_dashboard(browser, srv.url)
         page.wait_for_selector("#token-box", state="visible")
@@ -207,12 +207,12 @@ def test_dashboard_asks_for_the_token(browser, tmp_path, small_cfg, artifacts) -
         page.fill("#token", "wrong")
         page.click("#start-btn")
         _wait_text(page, "#start-msg", "401: the API token is wrong")
-        page.fill("#token", "s3cret-token")
+        page.fill("#token", "s3cret-token-0123456")
         page.click("#start-btn")
         _wait_text(page, "#start-msg", "started")
         run_id = _js(page, "state.runId")
         page.wait_for_function("document.getElementById('run-badge').textContent === 'running'", timeout=30_000)
-        assert _js(page, "sessionStorage.getItem('furnace-twin-token')") == "s3cret-token"
+        assert _js(page, "sessionStorage.getItem('furnace-twin-token')") == "s3cret-token-0123456"
         assert _js(page, "localStorage.getItem('furnace-twin-token')") is None
         assert "s3cret" not in page.url
         page.click("#stop-btn")  # a mutating request with the token from the field

@@ -31,7 +31,7 @@ def make_client(tmp_path: Path, furnace: Path, viser: bool = False, **settings) 
     cfg = load_config(furnace)
     s = Settings(data_dir=tmp_path / "data", viser_port=free_port() if viser else 0, **settings)
     return TestClient(create_app(s, cfg, loop_factory=fake_factory(), viser=viser,
-                                 furnace_name=furnace_name(cfg, furnace)))
+                                 furnace_name=furnace_name(cfg, furnace)), base_url="http://127.0.0.1")
 
 
 def test_furnace_describes_itself_and_every_limit(tmp_path, low_stroke) -> None:
@@ -82,7 +82,7 @@ def test_run_reports_the_reference_and_oscillation_in_force(tmp_path, small_cfg)
     keeps the last ones in force, also after a server restart (from the database)."""
     settings = Settings(data_dir=tmp_path / "data", viser_port=0)
     start = {"duration": 600.0, "speed": 1.0, "reference": {"setpoint": 900.0, "t_E": 3.0}}
-    with TestClient(create_app(settings, small_cfg, loop_factory=fake_factory())) as c:
+    with TestClient(create_app(settings, small_cfg, loop_factory=fake_factory()), base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json=start).json()["id"]
         wait_status(c, run_id, {"running"})
         body = c.get(f"/api/runs/{run_id}").json()
@@ -98,7 +98,8 @@ def test_run_reports_the_reference_and_oscillation_in_force(tmp_path, small_cfg)
         c.post(f"/api/runs/{run_id}/stop")
         ended = wait_status(c, run_id, {"stopped"})
         assert ended["reference"] == {"points": [[2.0, 1000.0]]} and ended["oscillation"] == osc
-    with TestClient(create_app(settings, small_cfg, loop_factory=fake_factory())) as c:  # a restarted server
+    with TestClient(create_app(settings, small_cfg, loop_factory=fake_factory()),
+                    base_url="http://127.0.0.1") as c:  # a restarted server
         again = c.get(f"/api/runs/{run_id}").json()
         assert again["reference"] == {"points": [[2.0, 1000.0]]} and again["oscillation"] == osc
 

@@ -33,7 +33,8 @@ async def stalled_client(app, path: str, accepted: list[bool]) -> None:
         await asyncio.Event().wait()  # a frame was handed over: this client never takes it
 
     scope = {"type": "websocket", "path": path, "raw_path": path.encode(), "query_string": b"",
-             "headers": [], "scheme": "ws", "server": ("testserver", 80), "client": ("stalled", 1),
+             "headers": [(b"host", b"127.0.0.1")], "scheme": "ws", "server": ("127.0.0.1", 80),
+             "client": ("stalled", 1),
              "root_path": "", "subprotocols": [], "asgi": {"version": "3.0"}, "state": {}}
     await app(scope, receive, send)
 
@@ -42,12 +43,12 @@ def test_stalled_client_does_not_slow_run_or_others(tmp_path, small_cfg) -> None
     settings = Settings(data_dir=tmp_path / "data", client_send_timeout_s=1.0)
     app = create_app(settings, small_cfg, loop_factory=fake_factory())
     duration, speed = 6.0, 5.0
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json={"duration": duration, "speed": speed}).json()["id"]
         accepted: list[bool] = []
         c.portal.start_task_soon(stalled_client, app, f"/api/runs/{run_id}/stream", accepted)
         frames = []
-        with c.websocket_connect(f"/api/runs/{run_id}/stream") as ws:
+        with c.websocket_connect(f"ws://127.0.0.1/api/runs/{run_id}/stream") as ws:
             while True:
                 try:
                     frames.append((time.time(), json.loads(ws.receive_text())))

@@ -17,7 +17,7 @@ from conftest import fake_factory, wait_status
 def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
     s = Settings(data_dir=tmp_path / "data", viser_port=free_port())
     app = create_app(s, small_cfg, loop_factory=fake_factory(), viser=True)
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:
         view = app.state.viser
         assert view.host == "127.0.0.1" and app.state.viser_url.startswith("http://127.0.0.1:")
         view._stop.set()  # drive the updates from the test instead of the view's thread

@@ -61,7 +61,8 @@ def test_oscillating_specimen_estimated_by_both_estimators(small_radiation, seed
         assert abs(e[0]) > 40.0  # the initial 50 K offset was really there
         # the paper's bound for TC4 is 3 % oscillating and 1.5 % fixed: measured 0.60-0.65 % here
         assert np.abs(e[late]).max() / SETPOINT < 0.01, name
-    amp = {name: oscillation_amplitude(t[steady], run[name][steady], OSC.period) for name in ("averaged", "position_aware")}
+    amp = {name: oscillation_amplitude(t[steady], run[name][steady], OSC.period)
+           for name in ("averaged", "position_aware")}
     # the averaged model misses the motion: an error at the oscillation frequency (measured 2.3-2.4 K);
     # the model at eta(t_j) removes most of it (measured 0.5 K): at least halved (issue 11)
     assert amp["averaged"] > 1.0

@@ -60,16 +60,19 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanEstimate
 from twin.control.initial_guess import V_MAX, KnotGrid, free_guess, heating_efficiency, knot_weights, parametrized_guess
 from twin.control.ipopt_callbacks import casadi_objective
 from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
@@ -94,6 +97,10 @@ INPUT_REGULARIZATION = 1e-3
 SETTLE_TIME_CONSTANTS = 2.0
 #: Longest reference the horizon search looks at (s): scenario.MAX_DURATION_S.
 MAX_REFERENCE_S = 3600.0
+#: Most v-knots of one OCP.  The sweep's residual Jacobian and Hessian grow with K^2 (memory and
+#: time); a longer horizon holds v over proportionally longer intervals (a multiple of t_s) instead.
+#: 240 keeps the paper's run (beta t_E = 144 s) and transitions up to 200 s at the 1 s knots.
+MAX_KNOTS = 240
 
 
 # --------------------------------------------------------------------------- helpers
@@ -131,6 +138,99 @@ def _fastest_rate(model: DiscreteDynamics, theta: Array, u: Array) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(J))))
 
 
+@dataclass(frozen=True)
+class PlanGrid:
+    """Where and how finely a plan is made: horizon, knot interval and count, Heun substeps per knot."""
+
+    t0: float
+    horizon: float
+    interval: float  # s, a multiple of t_s
+    K: int
+    n_heun: int
+    t_end: float  # end of the reference's transition (s)
+    T_final: float  # K
+    T_hot: float  # hottest temperature planned for (K)
+
+    def estimate(self, model: DiscreteDynamics, cfg: FurnaceConfig | None = None, *,
+                 timed: bool = False, check: Callable[[], None] | None = None) -> PlanEstimate:
+        """Size of the plan on this grid (:class:`twin.control.budget.PlanEstimate`); with ``timed=True``
+        (needs ``cfg``) also its typical cost: one sweep of this OCP is run and timed (it allocates the
+        arrays :attr:`PlanEstimate.memory_mb` counts: check that first), and a Jacobian pair and a Riccati step."""
+        substeps = max(1, int(round(self.interval / model.t_s)))
+        est = PlanEstimate(horizon_s=self.horizon, knots=self.K, substeps=self.K * self.n_heun,
+                           samples=self.K * substeps, n=model.n, m=model.m)
+        if not timed:
+            return est
+        assert cfg is not None
+        th, u = np.full(model.n, self.T_final), np.full(model.m, 0.5)
+        grid = KnotGrid(self.t0, model.t_s, substeps, self.K)
+        inputs = ScaledDistribution(model.m, self.K, cfg.feedforward.smoothing)
+        shooting = CoarseShooting(model, th, grid.dt, self.n_heun, np.full(self.K + 1, self.T_final),
+                                  knot_weights(grid), cfg.feedforward.g0, cfg.feedforward.g1, inputs,
+                                  check=check)
+        p = np.concatenate([np.full(model.m, 1.0 / model.m), np.full(self.K, 0.5)])
+        sweep_s = _seconds(lambda: shooting.sweep(p), repeat=1)
+        jac_s = _seconds(lambda: (model.jac_theta(th, u), model.jac_u(th, u)))
+        from twin.control.lqg import riccati_step
+
+        n1 = model.n + 1
+        P, Phi, Gam, Q = np.eye(n1), np.eye(n1), np.ones((n1, model.m)), np.eye(n1)
+        riccati_s = _seconds(lambda: riccati_step(P, Phi, Gam, Q, 1.0))
+        return dataclasses.replace(est, sweep_s=sweep_s, jacobian_s=jac_s, riccati_s=riccati_s)
+
+
+def _seconds(f: Callable[[], Any], repeat: int = 5) -> float:
+    """Median of ``repeat`` wall times of ``f()`` (s): the machine's speed now, load included."""
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times))
+
+
+def check_budget(grid: PlanGrid, model: DiscreteDynamics, cfg: FurnaceConfig, budget: PlanBudget) -> PlanEstimate:
+    """Raise :class:`twin.control.budget.PlanTooLarge` if the plan on ``grid`` needs more memory than
+    ``budget`` allows, or (then timed: one sweep) more time; returns the timed estimate."""
+    budget.refuse_if_too_large(grid.estimate(model))
+    est = grid.estimate(model, cfg, timed=True, check=budget.check_cancel)  # the estimate's time is not the plan's
+    budget.refuse_if_too_large(est)
+    return est
+
+
+def plan_grid(model: DiscreteDynamics, T_ref_fn: RefFn, t0: float, cfg: FurnaceConfig, *,
+              horizon: float | None = None, t_stop: float | None = None,
+              interval: float = DEFAULT_INTERVAL_S, theta0: ArrayLike | None = None) -> PlanGrid:
+    """The grid of the OCP from run time ``t0`` (no solving).
+
+    Horizon: ``horizon`` if given, else beta (transition end - t0) (section 4.1), at least
+    :data:`SETTLE_TIME_CONSTANTS` fillet-mean time constants at the final temperature; never beyond
+    the run's end ``t_stop`` by more than one knot interval (the plan must cover the last sample; nothing
+    after the run is worth computing).  Knots every ``interval`` s, or coarser so that there are at most
+    :data:`MAX_KNOTS`.
+    """
+    t_s = model.t_s
+    t_end = transition_end(T_ref_fn, t0, t_s)
+    T_final = float(np.asarray(T_ref_fn(np.array([t_end])), float)[0])
+    if horizon is None:
+        theta_lin = np.full(model.n, T_final)
+        horizon = max(cfg.feedforward.beta * (t_end - t0),
+                      SETTLE_TIME_CONSTANTS * mean_time_constant(model, theta_lin, np.full(model.m, 0.5)))
+    substeps = max(1, int(round(interval / t_s)))
+    if t_stop is not None:
+        horizon = min(horizon, max(t_stop - t0, 0.0) + substeps * t_s)
+    substeps = max(substeps, int(math.ceil(horizon / (MAX_KNOTS * t_s) - 1e-9)))
+    K = max(2, int(math.ceil(horizon / (substeps * t_s) - 1e-9)))
+    t_knots = t0 + np.arange(K + 1) * substeps * t_s
+    hot = [T_final, float(np.max(np.asarray(T_ref_fn(t_knots), float)))]
+    if theta0 is not None:
+        hot.append(float(np.max(np.asarray(theta0, float))))
+    T_hot = max(hot)
+    lam = _fastest_rate(model, np.full(model.n, T_hot), np.full(model.m, 0.5))
+    n_heun = max(1, int(math.ceil(substeps * t_s * lam / HEUN_STEP_LIMIT)))
+    return PlanGrid(float(t0), float(horizon), substeps * t_s, K, n_heun, t_end, T_final, T_hot)
+
+
 # --------------------------------------------------------------------------- the NLP
 def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | None) -> dict[str, Any]:
     """IPOPT options (stack-notes.md).
@@ -154,6 +254,7 @@ def _ipopt_options(max_iter: int, max_wall_s: float, extra: dict[str, Any] | Non
         "ipopt.acceptable_iter": 3,
         "ipopt.max_wall_time": max_wall_s,
         "error_on_fail": False,
+        "show_eval_warnings": False,  # a cancelled budget raises in a callback: no page of CasADi's warning
     }
     opts.update(extra or {})
     return opts
@@ -174,6 +275,8 @@ def solve_feedforward(
     max_iter: int = 400,
     max_wall_s: float = 120.0,
     ipopt_options: dict[str, Any] | None = None,
+    t_stop: float | None = None,
+    budget: PlanBudget | None = None,
 ) -> FeedforwardPlan:
     """Solve the feedforward OCP (20) from theta0 at run time t0 and return the plan.
 
@@ -196,29 +299,42 @@ def solve_feedforward(
     horizon : float, optional
         OCP horizon (s); default beta * (transition end - t0) (section 4.1), at least
         2 time constants of the fillet mean at the final temperature
-        (:func:`mean_time_constant`) so a late re-plan still covers the settling.
+        (:func:`mean_time_constant`) so a late re-plan still covers the settling
+        (:func:`plan_grid`).
     interval : float
-        Knot spacing of v (s), a multiple of t_s.
+        Knot spacing of v (s), a multiple of t_s; coarser when the horizon needs more than
+        :data:`MAX_KNOTS` knots.
     best_effort : bool
         Return the last iterate (``success=False``) instead of raising when IPOPT fails.
     max_iter, max_wall_s : int, float
         IPOPT iteration and wall-time limits.
     ipopt_options : dict, optional
         Extra CasADi/IPOPT options (e.g. ``{"ipopt.print_level": 5}`` to debug).
+    t_stop : float, optional
+        Run time (s) at which the run ends: the horizon stops there (plus one knot interval).
+    budget : PlanBudget, optional
+        Time, memory and cancellation of this job (:mod:`twin.control.budget`); its wall time also
+        caps ``max_wall_s``.
 
     Raises
     ------
     FeedforwardError
         When IPOPT does not report success and ``best_effort`` is False.
+    PlanTooLarge
+        (a ``ValueError``) before solving, when the plan is estimated beyond the budget; while solving,
+        when the budget's wall time is spent.
+    PlanCancelled
+        When the budget's token is cancelled.
     """
     return _solve_feedforward(model, theta0, t0, T_ref_fn, cfg, warm_start, parametrized, horizon,
-                              interval, best_effort, max_iter, max_wall_s, ipopt_options)
+                              interval, best_effort, max_iter, max_wall_s, ipopt_options, t_stop, budget)
 
 
 def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_ref_fn: RefFn,
                        cfg: FurnaceConfig, warm_start: FeedforwardPlan | None, parametrized: bool,
                        horizon: float | None, interval: float, best_effort: bool, max_iter: int,
-                       max_wall_s: float, ipopt_options: dict[str, Any] | None) -> FeedforwardPlan:
+                       max_wall_s: float, ipopt_options: dict[str, Any] | None, t_stop: float | None,
+                       budget: PlanBudget | None) -> FeedforwardPlan:
     ca = _ca()
     wall0 = time.perf_counter()
     fw = cfg.feedforward
@@ -226,19 +342,14 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     th0 = np.asarray(theta0, float)
     if th0.shape != (model.n,) or not np.all(np.isfinite(th0)):
         raise ValueError(f"theta0 must be a finite vector of {model.n} temperatures")
-    substeps = max(1, int(round(interval / t_s)))
-    t_end = transition_end(T_ref_fn, t0, t_s)
-    T_final = float(np.asarray(T_ref_fn(np.array([t_end])), float)[0])
-    theta_lin = np.full(model.n, T_final)
-    u_mid = np.full(model.m, 0.5)
-    if horizon is None:
-        horizon = max(fw.beta * (t_end - t0), SETTLE_TIME_CONSTANTS * mean_time_constant(model, theta_lin, u_mid))
-    K = max(2, int(math.ceil(horizon / (substeps * t_s) - 1e-9)))
-    grid = KnotGrid(float(t0), t_s, substeps, K)
-    # Heun substeps: h |lambda_max| <= HEUN_STEP_LIMIT at the hottest state planned for
-    T_hot = max(T_final, float(np.max(np.asarray(T_ref_fn(grid.t_knots), float))), float(np.max(th0)))
-    lam = _fastest_rate(model, np.full(model.n, T_hot), u_mid)
-    n_heun = max(1, int(math.ceil(grid.dt * lam / HEUN_STEP_LIMIT)))
+    pg = plan_grid(model, T_ref_fn, t0, cfg, horizon=horizon, t_stop=t_stop, interval=interval, theta0=th0)
+    if budget is not None:
+        budget.check("the feedforward plan")
+        check_budget(pg, model, cfg, budget)
+        max_wall_s = min(max_wall_s, max(budget.remaining_s, 1e-3))
+    horizon, substeps = pg.horizon, int(round(pg.interval / t_s))
+    grid = KnotGrid(float(t0), t_s, substeps, pg.K)
+    theta_lin, n_heun = np.full(model.n, pg.T_final), pg.n_heun
 
     T_knots = np.asarray(T_ref_fn(grid.t_knots), float)
     m = model.m
@@ -258,7 +369,7 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     if parametrized:
         reg[:m] = 0.0  # the distribution d is fixed by eta^T d = 1; only v needs it
     shooting = CoarseShooting(model, th0, grid.dt, n_heun, T_knots, knot_weights(grid), fw.g0, fw.g1, inputs,
-                              reg)
+                              reg, check=None if budget is None else budget.check)
     x = ca.MX.sym("p", inputs.n_params)
     if parametrized:
         g = ca.dot(ca.DM(eta), x[:m])  # eta^T d = 1: fixes the scale of (v, d); see the module docstring
@@ -270,7 +381,14 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     opts = _ipopt_options(max_iter, max_wall_s, ipopt_options)
     opts.update({"grad_f": grad_cb, "hess_lag": hess_cb})
     solver = ca.nlpsol("feedforward", "ipopt", {"x": x, "f": f_cb(x), "g": g}, opts)
-    sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    try:
+        sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    except RuntimeError:  # an exception in a callback (the budget's check) reaches us as CasADi's RuntimeError
+        if budget is not None:
+            budget.check("the feedforward plan")
+        raise
+    if budget is not None:
+        budget.check("the feedforward plan")  # IPOPT stopped at the wall-time limit, or a cancel came late
     stats = solver.stats()
     status = str(stats.get("return_status", "unknown"))
     success = bool(stats.get("success", False))

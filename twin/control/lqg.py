@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -170,8 +171,12 @@ class Gains:
         return self.K[j] if 0 <= j < self.K.shape[0] else self.K_terminal
 
 
+#: samples of the Riccati recursion between two budget checks (a few ms)
+CHECK_EVERY = 50
+
+
 def lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig, *,
-              jacobian_every: int = 1) -> Gains:
+              jacobian_every: int = 1, check: Callable[[], None] | None = None) -> Gains:
     """Time-varying LQ gains along a plan, eqs. (23)-(29).
 
     Parameters
@@ -185,6 +190,9 @@ def lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig
     jacobian_every : int
         Evaluate Phi_j, Gamma_j only every this many samples and hold them in between
         (a Jacobian of the full model costs milliseconds; 1 = every sample).
+    check : callable, optional
+        Called every :data:`CHECK_EVERY` samples; it raises to end the design (a cancelled or spent
+        :class:`twin.control.budget.PlanBudget`).
 
     Notes
     -----
@@ -194,11 +202,11 @@ def lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig
     BLAS runs single-threaded here: for ~106 x 106 products threads only contend on
     the shared cores (the DARE took 1.9 s multi-threaded vs 0.07 s on one thread).
     """
-    return _lqg_gains(model, plan, cfg, jacobian_every)
+    return _lqg_gains(model, plan, cfg, jacobian_every, check or (lambda: None))
 
 
 def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfig,
-               jacobian_every: int) -> Gains:
+               jacobian_every: int, check: Callable[[], None]) -> Gains:
     t_start = time.perf_counter()
     w = cfg.lqg
     c_m = np.asarray(model.c_m, float)
@@ -220,6 +228,8 @@ def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfi
     key: tuple[int, float] | None = None
     Pt = Gt = np.empty(0)
     for j in range(N - 1, -1, -1):
+        if j % CHECK_EVERY == 0:
+            check()
         jj = (j // every) * every
         delta = anti_windup_delta(plan.u_ff[j], w.delta0)
         if key is None or key[0] != jj:

@@ -15,7 +15,7 @@ Example
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -115,6 +115,14 @@ class FeedforwardPlan:
         ju = min(j, self.n_steps - 1)
         jx = min(j, self.n_steps)
         return self.u_ff[ju], self.theta_ref[jx], float(self.T_ref[jx])
+
+    def shifted(self, dt: float) -> FeedforwardPlan:
+        """The same plan starting ``dt`` s later (a re-plan that comes into force after the time it was made
+        for: its reference moves with it)."""
+        warm = dict(self.warm)
+        if "t_knots" in warm:
+            warm["t_knots"] = np.asarray(warm["t_knots"], float) + dt
+        return replace(self, t=self.t + dt, warm=warm)
 
     def v_at(self, t: ArrayLike) -> Array:
         """v(t) of the parametrized plan at run times ``t`` (held per OCP interval and outside)."""

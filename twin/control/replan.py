@@ -36,7 +36,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
-from twin.control.feedforward import RefFn, solve_feedforward
+from twin.control.budget import PlanBudget, PlanEstimate
+from twin.control.feedforward import RefFn, check_budget, plan_grid, solve_feedforward
 from twin.control.lqg import Gains, lqg_gains
 from twin.control.plan import FeedforwardPlan
 
@@ -61,6 +62,8 @@ def replan(
     best_effort: bool = False,
     jacobian_every: int = JACOBIAN_EVERY,
     horizon: float | None = None,
+    t_stop: float | None = None,
+    budget: PlanBudget | None = None,
 ) -> tuple[FeedforwardPlan, Gains]:
     """Feedforward plan and LQG gains for the rest of a run (sections 4.1-4.2).
 
@@ -84,6 +87,11 @@ def replan(
         Hold of the LQG linearization (:data:`JACOBIAN_EVERY`).
     horizon : float, optional
         OCP horizon (s); default as in :func:`twin.control.feedforward.solve_feedforward`.
+    t_stop : float, optional
+        Run time (s) at which the run ends: nothing is planned much beyond it
+        (:func:`twin.control.feedforward.plan_grid`).
+    budget : PlanBudget, optional
+        Wall time, memory and cancellation of this job (:mod:`twin.control.budget`).
 
     Returns
     -------
@@ -93,18 +101,32 @@ def replan(
     ------
     twin.control.feedforward.FeedforwardError
         If IPOPT fails and ``best_effort`` is False (the loop then keeps the old plan).
+    twin.control.budget.PlanTooLarge, twin.control.budget.PlanCancelled
+        Beyond the budget, or cancelled (the loop keeps the old plan).
     """
     start = time.perf_counter()
     theta = np.asarray(theta_hat, float)
     plan = solve_feedforward(model, theta, t_now, reference_fn, cfg, warm_start=previous_plan,
-                             parametrized=parametrized, best_effort=best_effort, horizon=horizon)
-    gains = lqg_gains(model, plan, cfg, jacobian_every=jacobian_every)
+                             parametrized=parametrized, best_effort=best_effort, horizon=horizon, t_stop=t_stop,
+                             budget=budget)
+    gains = lqg_gains(model, plan, cfg, jacobian_every=jacobian_every,
+                      check=None if budget is None else (lambda: budget.check("the LQG design")))
     log.info(
         "re-plan at t = %.1f s (%s): %s, %d iterations, OCP %.2f s, gains %.2f s, total %.2f s",
         t_now, "warm" if previous_plan is not None else "cold", plan.status, plan.iterations,
         plan.solve_s, gains.design_s, time.perf_counter() - start,
     )
     return plan, gains
+
+
+def plan_estimate(model: Any, cfg: FurnaceConfig, reference_fn: RefFn, t_now: float, *,
+                  t_stop: float | None = None, budget: PlanBudget | None = None) -> PlanEstimate:
+    """Size and typical cost of the plan :func:`replan` would make from ``t_now``: with a ``budget``, raises
+    :class:`twin.control.budget.PlanTooLarge` beyond it (its memory is checked before one sweep is timed)."""
+    grid = plan_grid(model, reference_fn, t_now, cfg, t_stop=t_stop)
+    if budget is None:
+        return grid.estimate(model, cfg, timed=True)
+    return check_budget(grid, model, cfg, budget)
 
 
 def replan_seconds(cfg: FurnaceConfig, radiation: Any) -> float:

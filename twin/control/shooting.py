@@ -19,6 +19,7 @@ same code serves the parametrized (eq. 18) and the free OCP (Remark 4).
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -167,10 +168,13 @@ class CoarseShooting:
     g0, g1 : weights of eq. (20a)
     inputs : an :class:`InputMap`
     reg : (n_params,) optional weights rho_i of a Tikhonov term sum_i rho_i p_i^2 (K^2)
+    check : called at every knot of every sweep and simulation; it raises to end the solve
+        (a cancelled or spent :class:`twin.control.budget.PlanBudget`)
     """
 
     def __init__(self, model: DiscreteDynamics, theta0: Array, dt: float, n_heun: int, T_knots: Array,
-                 weights: Array, g0: float, g1: float, inputs: InputMap, reg: Array | None = None) -> None:
+                 weights: Array, g0: float, g1: float, inputs: InputMap, reg: Array | None = None,
+                 check: Callable[[], None] | None = None) -> None:
         self.model = model
         self.theta0 = np.asarray(theta0, float)
         self.dt = dt
@@ -187,6 +191,7 @@ class CoarseShooting:
         lam, V = np.linalg.eigh(self.W)
         keep = lam > 1e-12 * max(float(lam.max()), 1e-300)
         self.R = np.sqrt(lam[keep])[:, None] * V[:, keep].T  # W = R^T R on its range
+        self._check = check or (lambda: None)
         self._cache: OrderedDict[bytes, SweepResult] = OrderedDict()
         self.n_sweeps = 0
         self.n_simulations = 0
@@ -258,6 +263,7 @@ class CoarseShooting:
         traj[0] = theta
         cost = 0.0
         for k in range(self.K):
+            self._check()
             theta = self._interval(theta, U[k])
             traj[k + 1] = theta
             cost += self._stage_cost(k, theta)
@@ -283,6 +289,7 @@ class CoarseShooting:
         dJ_dtheta = np.zeros((K + 1, n))
         cost = 0.0
         for k in range(K):
+            self._check()
             dU, na = self.map.input_derivatives(p, k)
             theta, stages = self._interval_jacobians(theta, U[k])
             intervals.append(stages)

@@ -17,12 +17,14 @@ Per sample j (t_j = j t_s), following the paper's order (eqs. 13, 17, 25, 14):
 Each call of :meth:`ClosedLoop.step` returns an immutable :class:`Snapshot` of
 sample j.  Runs are deterministic for a seed.
 
-Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`)
-take effect at the next sample: the reference (and the furnace's motion) switch at
-once, while the new feedforward, reference state, gains and model are re-planned
-from the current estimate, in a background thread when ``background=True`` (the
-backend) so the loop never stalls, and swapped in at the first sample after the
-plan is ready.
+Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`) are
+re-planned (feedforward, reference state, gains, model) from the current estimate, in a
+background thread when ``background=True`` (the backend) so the loop never stalls, and take
+effect together -- reference, furnace motion and plan -- at the first sample after the plan is
+ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing).
+Each returns a future of the run time of the first sample that uses the change (a points reference's
+times count from there; a plan made for an earlier sample moves there with its reference).  Plans never reach
+far beyond the run's end, and a :class:`twin.control.budget.PlanBudget` bounds and cancels them.
 
 Example
 -------
@@ -36,11 +38,12 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,11 +51,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget
 from twin.furnace.interface import Furnace, Readings
-from twin.model.tables import PARAMETERS, Parameters
+from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.estimators import RunEstimators
+from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
+from twin.runs.replanning import Replanner
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -72,12 +79,6 @@ class _Plan:
     parameters: Parameters  # the calibrated deviations the controller's model was built with
 
 
-@dataclass
-class _Pending:
-    future: Future[_Plan]
-    description: str
-
-
 class ClosedLoop:
     """A furnace + EKF + feedforward/LQG for one scenario.
 
@@ -90,6 +91,8 @@ class ClosedLoop:
     background : re-plan in a worker thread (backend) instead of inline (CLI, tests).
     plan_cache : shared between loops (the campaign): the initial plan of an identical start
         (same oscillation, reference and initial estimate) is solved once.
+    budget : wall time, memory and cancellation of every plan of the run (:mod:`twin.control.budget`);
+        the first plan uses it, each re-plan a child of it.  ``None``: no estimate, IPOPT's own limits.
     """
 
     def __init__(
@@ -101,9 +104,9 @@ class ClosedLoop:
         furnace: Furnace | None = None,
         background: bool = False,
         plan_cache: dict[Any, _Plan] | None = None,
+        budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.lqg import Controller
-        from twin.estimation.choice import build_estimator
         from twin.model.tables import model_tables
         from twin.radiation import radiation_model
 
@@ -119,10 +122,13 @@ class ClosedLoop:
         self.furnace: Furnace = furnace
         self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
-        self._executor = ThreadPoolExecutor(max_workers=1) if background else None
-        self._pending: _Pending | None = None
+        self._budget = budget
+        self._replanner = Replanner(background, budget)
         self._events: list[str] = []
         self._oscillation = scenario.oscillation
+        # a change waiting for its plan: (spec, T_ref(t)) and the oscillation, in force when it is installed
+        self._wanted_reference: tuple[Reference, Callable[[Any], Any]] | None = None
+        self._wanted_oscillation: OscillationSpec | None = None
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
@@ -137,17 +143,12 @@ class ClosedLoop:
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters())
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
-        spec = scenario.estimator
-        self.estimator = build_estimator(spec, self.tables, scenario.oscillation, cfg, theta0)
-        self.shadow = None if spec.shadow is None else build_estimator(
-            spec.shadow, self.tables, scenario.oscillation, cfg, theta0)
-        self._replan_threshold = cfg.calibration.replan_threshold
-        self._replan_interval = cfg.calibration.replan_interval
-        self._last_calibration_t = -np.inf
+        self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
+        self.estimator = self.estimators.primary  # the one that feeds the controller
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -162,6 +163,7 @@ class ClosedLoop:
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
         self.record = RunRecord(header, has_truth=self._has_truth)
+        self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 
@@ -184,8 +186,10 @@ class ClosedLoop:
 
         return reference_trajectory(spec, T_initial, t_start=t_start, T_range=self._T_range)
 
-    def _plan(self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
-              parameters: Parameters) -> _Plan:
+    def _plan(
+        self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
+        parameters: Parameters, budget: PlanBudget | None = None,
+    ) -> _Plan:
         """Model (averaged over the motion, eq. 11, with the calibrated parameters), feedforward and gains
         for the rest of the run from t0 (eqs. 18-29)."""
         from twin.control.replan import replan
@@ -193,7 +197,8 @@ class ClosedLoop:
 
         model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
                                parameters=parameters)
-        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous)
+        plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, t_stop=self.scenario.duration,
+                             budget=budget)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
@@ -201,37 +206,73 @@ class ClosedLoop:
         return _Plan(model, plan, gains, spec, parameters)
 
     # ------------------------------------------------------------------ live changes
-    def set_reference(self, spec: Reference) -> None:
+    def set_reference(self, spec: Reference) -> Future[float]:
         """New reference from now on (times of a points reference count from now); re-plans.
 
-        Raises ValueError, before anything changes, if the reference is unreachable.
+        Raises ValueError, before anything changes, if the reference is unreachable.  Returns a future of
+        the run time from which the reference (with its plan) is in force (:mod:`twin.runs.replanning`).
         """
         with self._lock:
             t_now = self.j * self.t_s
             T_now = float(self._ctl.model.c_m @ self.estimator.state.theta)
             ref_fn = self._make_reference(spec, T_now, t_start=t_now)
-            self._reference_spec = spec
-            self._set_ref_fn(ref_fn)
-            self._start_replan(self._oscillation, f"reference changed at t = {t_now:.1f} s")
+            self._wanted_reference = (spec, ref_fn)
+            return self._request("reference", f"reference change requested at t = {t_now:.1f} s")
 
-    def set_oscillation(self, spec: OscillationSpec) -> None:
-        """Switch the specimen motion now; model, plan and gains follow after re-planning."""
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
+        """Switch the specimen motion; the motion, model, plan and gains switch together once re-planned.
+        Returns a future of the run time from which it is in force."""
         with self._lock:
             t_now = self.j * self.t_s
-            self._oscillation = spec
-            self.furnace.set_oscillation(spec, t_now)
-            self._start_replan(spec, f"oscillation {'on' if spec.enabled else 'off'} at t = {t_now:.1f} s")
+            self._wanted_oscillation = spec
+            return self._request("oscillation", f"oscillation {'on' if spec.enabled else 'off'} requested at "
+                                                f"t = {t_now:.1f} s")
 
-    def _start_replan(self, spec: OscillationSpec, description: str) -> None:
+    def _request(self, kind: str, description: str) -> Future[float]:
+        """Re-plan for the wanted reference and oscillation from the current estimate (coalesced)."""
         theta = self.estimator.state.theta.copy()
         t0 = self.j * self.t_s
-        ref_fn, previous, params = self._ref_fn, self._ctl.plan, self.estimator.parameters
+        spec = self._wanted_oscillation or self._oscillation
+        wanted_ref = self._wanted_reference
+        ref_fn = wanted_ref[1] if wanted_ref is not None else self._ref_fn
+        previous = self._ctl.plan
+        parameters = self.estimator.parameters  # the controller's model follows the calibration
         self._events.append(description)
-        if self._executor is None:
-            self._install(self._plan(spec, theta, t0, ref_fn, previous, params), description)
-        else:
-            fut = self._executor.submit(self._plan, spec, theta, t0, ref_fn, previous, params)
-            self._pending = _Pending(fut, description)
+
+        def job(budget: PlanBudget) -> _Plan:
+            return self._plan(spec, theta, t0, ref_fn, previous, parameters, budget=budget)
+
+        def install(ctl: _Plan, kinds: list[str]) -> float:
+            t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
+            if wanted_ref is not None and wanted_ref is self._wanted_reference:
+                ref = wanted_ref[1]
+                if t > t0 + 1e-9:
+                    # planned from t0, in force from t (the furnace went on meanwhile): the new reference
+                    # and its plan start at t, so a points reference's times count from the change in force
+                    ref = self._make_reference(wanted_ref[0], float(np.asarray(ref(t0))), t_start=t)
+                    ctl = dataclasses.replace(ctl, plan=ctl.plan.shifted(t - t0))
+                self._reference_spec = wanted_ref[0]
+                self._set_ref_fn(ref)
+                self._wanted_reference = None
+            if spec is self._wanted_oscillation:
+                self._wanted_oscillation = None
+            if spec != self._oscillation:
+                self._oscillation = spec
+                self.furnace.set_oscillation(spec, t)
+            said = {"reference": f"reference changed at t = {t:.1f} s",
+                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s",
+                    "calibration": f"calibration at t = {t:.1f} s"}
+            self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
+            return t
+
+        def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
+            self._wanted_reference, self._wanted_oscillation = None, None
+            self._events.append(f"re-planning failed ({' and '.join(kinds)} not applied): {exc}")
+
+        future = self._replanner.request(kind, job, install, fail)
+        if future.done() and future.exception() is not None:  # inline (no background): raise as before
+            raise future.exception()  # type: ignore[misc]
+        return future
 
     def _install(self, ctl: _Plan, description: str) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over."""
@@ -239,36 +280,8 @@ class ClosedLoop:
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         if motion_changed:  # the averaged estimators switch to the new period average with the controller
-            for est in (self.estimator, self.shadow):
-                if est is not None:
-                    est.set_model(est.model.with_oscillation(ctl.oscillation if ctl.oscillation.enabled else None))
+            self.estimators.switch_motion(ctl.oscillation if ctl.oscillation.enabled else None)
         self._events.append(f"re-planned ({description}): {ctl.plan.status}")
-
-    def _follow_calibration(self, t: float) -> None:
-        """Re-plan the controller when a calibrated parameter is known well (sigma below the threshold) and
-        moved past the threshold since its plan, at most once per ``calibration.replan_interval``."""
-        est = self.estimator
-        if not est.k or self._pending is not None or t < self._last_calibration_t + self._replan_interval:
-            return
-        cal = est.calibration()
-        planned = self._ctl.parameters
-        if not any(v["sigma"] < self._replan_threshold
-                   and abs(v["value"] - getattr(planned, name)) > self._replan_threshold for name, v in cal.items()):
-            return
-        self._last_calibration_t = t
-        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})" for k, v in cal.items())
-        self._start_replan(self._oscillation, f"calibration at t = {t:.1f} s: {now}")
-
-    def _poll_pending(self) -> None:
-        p = self._pending
-        if p is None or not p.future.done():
-            return
-        self._pending = None
-        try:
-            self._install(p.future.result(), p.description)
-        except Exception as exc:  # a failed re-plan keeps the old plan running
-            log.exception("re-planning failed: %s", p.description)
-            self._events.append(f"re-planning failed ({p.description}): {exc}")
 
     # ------------------------------------------------------------------ the loop
     @property
@@ -278,24 +291,23 @@ class ClosedLoop:
     @property
     def replanning(self) -> bool:
         """A re-plan is being solved in the background (it is swapped in at the next sample when done)."""
-        p = self._pending
-        return p is not None and not p.future.done()
+        return self._replanner.solving
 
     def step(self) -> Snapshot:
         """Advance one sample; return the snapshot of sample j (before the furnace moves on)."""
         if self.done:
             raise StopIteration("run finished")
         with self._lock:
-            self._poll_pending()
+            self._replanner.poll()
             j, t = self.j, self.j * self.t_s
             readings = self._readings if self._readings is not None else self.furnace.read(t)
             self._readings = None
             eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
-            y = readings.for_estimator()
-            state = self.estimator.update(y)  # eq. 13 (faulty readings gated inside)
-            theta = state.theta
-            self._follow_calibration(t)
+            theta, shadow = self.estimators.update(readings.for_estimator())  # eq. 13 (faulty readings gated)
+            due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters)
+            if due is not None:  # the controller's model follows the calibration (re-planned like a change)
+                self._request("calibration", due)
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
@@ -303,7 +315,6 @@ class ClosedLoop:
 
             field_hat = ctl.model.fe.field_on_cells(theta)  # the cells are self.x, self.y
             truth = self.furnace.true_field()
-            shadow = None if self.shadow is None else self.shadow.update(y).theta
             events, self._events = tuple(self._events), []
             snap = Snapshot(
                 j=j, t=t, eta=eta, T_ref=T_ref, T_mean_hat=float(ctl.model.c_m @ theta),
@@ -313,43 +324,28 @@ class ClosedLoop:
                 inhomogeneity=float(self.fillet.sup(field_hat, T_ref)),
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
-                events=events, **self._estimator_outputs(shadow),
+                events=events, **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
+            problem = self._guard.check(snap)
+            if problem is not None:  # nothing of this sample reaches the furnace or the record
+                self.furnace.apply(np.zeros_like(snap.u), t)
+                raise EstimateDiverged(f"t = {t:.1f} s: {problem}; the lamps were switched off")
             self.record.append(snap)
 
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimator.predict(snap.u, eta)
+            self.estimators.predict(snap.u, eta)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
-            if self.shadow is not None:
-                self.shadow.predict(snap.u, eta)
             self.j += 1
             return snap
-
-    def _estimator_outputs(self, shadow: Array | None) -> dict[str, Any]:
-        """The snapshot fields of a calibrating estimator and of a shadow estimator (record.OPTIONAL_SERIES)."""
-        out: dict[str, Any] = {}
-        est = self.estimator
-        if est.k:
-            values, sigma = np.full(len(PARAMETERS), np.nan), np.full(len(PARAMETERS), np.nan)
-            for i, (name, v) in enumerate(est.calibration().items()):
-                values[PARAMETERS.index(name)], sigma[PARAMETERS.index(name)] = v["value"], v["sigma"]
-                assert name == est.model.calibrated[i]
-            out.update(parameters=values, parameter_sigma=sigma)
-        if shadow is not None:
-            fe = self._ctl.model.fe
-            out.update(shadow_T_mean_hat=float(fe.c_m @ shadow), shadow_tc_hat=self._phi_tc @ shadow,
-                       shadow_field_hat=fe.field_on_cells(shadow))
-        return out
 
     def run(self) -> Iterator[Snapshot]:
         while not self.done:
             yield self.step()
 
     def close(self) -> None:
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, cancel_futures=True)
+        self._replanner.close()
         self.furnace.close()
 
     # ------------------------------------------------------------------ results

@@ -201,6 +201,27 @@ class RunRecord:
         out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
         return out
 
+    def tail(self, start: int) -> dict[str, Any]:
+        """The series of samples ``start``.. (per-sample arrays, ``t_field``, and the events of those samples)
+        without the run's constants: one part of an append-only store (:mod:`twin.runs.series_store`);
+        the parts concatenated after the header give :meth:`arrays`."""
+        n_y, n_x = len(self.header.y), len(self.header.x)
+        out: dict[str, Any] = {}
+        for k, col in self._columns.items():
+            out[k] = col.view()[start:].copy()
+        for k in SAMPLE_SERIES:
+            out.setdefault(k, np.zeros(0))
+        for k in FIELD_SERIES:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
+                continue
+            out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
+        out["t_field"] = out["t"].copy()
+        t0 = float(out["t"][0]) if len(out["t"]) else np.inf
+        events = [(t, e) for t, e in self._events if t >= t0]
+        out["event_t"] = np.asarray([t for t, _ in events], float)
+        out["event_text"] = np.asarray([e for _, e in events], dtype=str)
+        return out
+
     def metrics(self) -> dict[str, Any]:
         """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
         from twin.runs.metrics import compute_metrics

@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
 from twin.limits import ScenarioLimits, furnace_name, scenario_limits
+from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
 from twin.runs.record import Snapshot, save_arrays
 from twin.scenario import Scenario, parse_scenario
@@ -130,7 +131,11 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         return 2
     out = Path(args.out)
     log.info("run: %s -> %s", scenario.to_json(), out)
-    result = execute_run(ClosedLoop(cfg, scenario), out, sink_factories=sink_factories)
+    try:
+        result = execute_run(ClosedLoop(cfg, scenario), out, sink_factories=sink_factories)
+    except EstimateDiverged as exc:  # the loop switched the lamps off; the data up to it is in `out`
+        print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
+        return 1
     if args.json:
         print(json.dumps(_json_safe(result)))  # noqa: T201
     else:

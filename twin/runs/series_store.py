@@ -1,0 +1,128 @@
+"""A run's time series on disk while it runs: appended in parts, consolidated at the end.
+
+Rewriting the whole ``timeseries.npz`` at every flush (every 2 s) made a 3600 s run at speed max
+write 1.1 GB for a 175 MB file.  Here each flush writes only the samples since the previous one:
+
+* ``timeseries.parts/header.npz``: the run's constants (:class:`twin.runs.record.RunHeader`), once;
+* ``timeseries.parts/part-000001.npz``, ...: :meth:`twin.runs.record.RunRecord.tail` of each flush,
+  each written atomically (tmp file, fsync, rename), so a crash loses at most the flush in progress;
+* at the end :func:`consolidate` writes ``timeseries.npz`` in the layout of product.md (the parts
+  concatenated after the header, the same arrays as ``RunRecord.arrays()``) and removes the parts;
+  after a crash the server's recovery does the same with what was flushed.
+
+Bytes written over a run: about once its final size (plus one small header).
+
+Example
+-------
+>>> import tempfile, numpy as np
+>>> from twin.runs.record import RunHeader, RunRecord, Snapshot
+>>> rec = RunRecord(RunHeader(x=np.arange(3.0), y=np.arange(2.0), tc_positions=np.zeros((4, 2)), L_s=3.0,
+...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"), has_truth=False)
+>>> def snap(j):
+...     return Snapshot(j=j, t=0.1 * j, eta=0.0, T_ref=300.0, T_mean_hat=300.0 + j, field_hat=np.zeros((2, 3)),
+...                     field_true=None, tc=np.zeros(4), tc_hat=np.zeros(4), u=np.zeros(1), u_ff=np.zeros(1),
+...                     inhomogeneity=1.0, true_mean=None, true_inhomogeneity=None, events=(f"e{j}",))
+>>> folder = Path(tempfile.mkdtemp())
+>>> store = SeriesStore(folder)
+>>> for j in range(5):
+...     rec.append(snap(j))
+...     _ = store.append(rec)       # a flush after every sample
+>>> consolidate(folder, folder / "timeseries.npz")["T_mean_hat"].tolist()
+[300.0, 301.0, 302.0, 303.0, 304.0]
+>>> sorted(p.name for p in folder.iterdir())
+['timeseries.npz']
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import uuid
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.runs.record import RunRecord, load_arrays, save_arrays
+
+log = logging.getLogger(__name__)
+
+PARTS = "timeseries.parts"
+HEADER = "header.npz"
+
+
+def parts_dir(folder: Path) -> Path:
+    return Path(folder) / PARTS
+
+
+class SeriesStore:
+    """Appends a growing :class:`RunRecord` to ``folder/timeseries.parts`` (module docstring)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.dir = parts_dir(folder)
+        self.written = 0  # samples stored so far
+        self.parts = 0
+        self.bytes_written = 0
+
+    def append(self, record: RunRecord) -> int:
+        """Store the samples added since the last call; returns the bytes written."""
+        n = len(record)
+        if n <= self.written:
+            return 0
+        self.dir.mkdir(parents=True, exist_ok=True)
+        before = self.bytes_written
+        if self.parts == 0:
+            self._save(self.dir / HEADER, record.header.arrays())
+        self.parts += 1
+        self._save(self.dir / f"part-{self.parts:06d}.npz", record.tail(self.written))
+        self.written = n
+        return self.bytes_written - before
+
+    def _save(self, path: Path, arrays: dict[str, Any]) -> None:
+        save_arrays(path, arrays, compress=False)
+        self.bytes_written += path.stat().st_size
+
+
+def has_parts(folder: Path) -> bool:
+    return (parts_dir(folder) / HEADER).is_file()
+
+
+def load_parts(folder: Path) -> dict[str, Any]:
+    """The stored parts as one time series (the ``timeseries.npz`` arrays); a part that cannot be read (the
+    flush a crash interrupted) ends the series there."""
+    d = parts_dir(folder)
+    out = load_arrays(d / HEADER)
+    series: dict[str, list[Any]] = {}
+    for part in sorted(d.glob("part-*.npz")):
+        try:
+            arrays = load_arrays(part)
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:
+            log.warning("%s is unreadable (%s): the series ends before it", part, exc)
+            break
+        for k, v in arrays.items():
+            series.setdefault(k, []).append(v)
+    for k, chunks in series.items():
+        out[k] = np.concatenate(chunks)
+    return out
+
+
+def consolidate(folder: Path, path: Path) -> dict[str, Any]:
+    """Write ``path`` (``timeseries.npz``) from the parts and remove them; returns the arrays.  Without
+    parts, returns what ``path`` holds (already consolidated; nothing if the run stored no sample)."""
+    if not has_parts(folder):
+        return load_arrays(path) if Path(path).is_file() else {}
+    arrays = load_parts(folder)
+    save_arrays(path, arrays, compress=False)
+    shutil.rmtree(parts_dir(folder), ignore_errors=True)
+    return arrays
+
+
+def snapshot_file(folder: Path, path: Path, tmp_dir: Path | None = None) -> Path:
+    """A readable ``timeseries.npz`` of a run in progress: the consolidated file if there is one, else the
+    parts so far written to a temporary file (the caller removes it)."""
+    if not has_parts(folder):
+        return path
+    tmp = Path(tmp_dir or folder) / f".timeseries-{uuid.uuid4().hex}.npz"
+    save_arrays(tmp, load_parts(folder), compress=False)
+    return tmp
