@@ -6,6 +6,22 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# Property tests (hypothesis): deterministic (derandomize: CI sees the same examples every run, no
+# example database), a bounded number of examples, and a per-example deadline generous enough for a
+# loaded 2-core machine (the slowest examples take ~0.2 s on a machine at load 20; 10 s only catches
+# a runaway, never a busy neighbour).
+settings.register_profile(
+    "furnace",
+    max_examples=40,
+    deadline=10_000,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+    print_blob=False,
+)
+settings.load_profile("furnace")
 
 REPO = Path(__file__).resolve().parents[1]
 TEST_RADIATION_CACHE = REPO / ".cache" / "test-radiation"  # also set for the whole session in ../conftest.py
@@ -28,10 +44,18 @@ def radiation_cache() -> Path:
     return TEST_RADIATION_CACHE
 
 
+#: the loaded test radiation model, kept for the life of the process: a mutation run
+#: (scripts/mutation.sh) forks one pytest session per mutant from a process that already loaded it
+_RADIATION: dict[str, object] = {}
+
+
 @pytest.fixture(scope="session")
 def small_radiation(radiation_cache):
     """``radiation_model(small_config())`` from the test cache (ray-traced on first use)."""
     from twin.config import small_config
     from twin.radiation import radiation_model
 
-    return radiation_model(small_config(), cache_dir=radiation_cache)
+    key = str(radiation_cache)
+    if key not in _RADIATION:
+        _RADIATION[key] = radiation_model(small_config(), cache_dir=radiation_cache)
+    return _RADIATION[key]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -10,9 +12,14 @@ from controller_standin import make_standin
 from twin.config import small_config
 from twin.control.lqg import (
     Controller,
+    Gains,
     IntegratorState,
+    RiccatiError,
+    anti_windup_delta,
     augmented_system,
     dare,
+    feedback_control,
+    integrator_delta,
     lqg_gains,
     riccati_step,
     weight_matrix,
@@ -234,6 +241,35 @@ def test_with_plan_keeps_integrator(standin, cfg):
     ctrl.control(0, plan.theta_ref[0] - 1.0)
     new = ctrl.with_plan(plan, gains)
     assert new.state.e_I == ctrl.state.e_I and new.state is not ctrl.state
+    assert new.model is standin and new.cfg is cfg  # the model is kept unless a new one is given
+
+
+def test_with_plan_switches_plan_gains_and_model_and_keeps_a_frozen_integrator(standin, cfg):
+    ctrl, plan, _ = _controller(standin, cfg, 0.98)
+    for j in range(3):
+        ctrl.control(j, plan.theta_ref[0] - 50.0)  # saturated: the integrator freezes (see above)
+    assert ctrl.state.frozen
+    other = make_standin(gain_scale=0.8)
+    new_plan = _constant_plan(other, np.full(other.m, 0.5), 30)
+    new_gains = lqg_gains(other, new_plan, cfg)
+    new = ctrl.with_plan(new_plan, new_gains, other)
+    assert new.model is other and new.plan is new_plan and new.gains is new_gains and new.cfg is cfg
+    assert new.state.frozen and new.state.e_I == ctrl.state.e_I
+    theta_hat = new_plan.theta_ref[2] + 0.3
+    u, u_ff, du = new.control(2, theta_hat)
+    out, _ = feedback_control(new_gains, new_plan, other.c_m, cfg.lqg.delta0, 2, theta_hat,
+                              IntegratorState(ctrl.state.e_I, True))
+    np.testing.assert_array_equal(u, out.u)
+    np.testing.assert_array_equal(du, out.du)
+
+
+def test_control_at_a_run_time_uses_the_sample_of_the_plan(standin, cfg):
+    ctrl, plan, gains = _controller(standin, cfg, 0.5)
+    theta_hat = plan.theta_ref[7] + 0.5
+    u, _, du = ctrl.control_at(0.69, theta_hat)  # 0.69 s / 0.1 s rounds to sample 7
+    e = np.append(theta_hat - plan.theta_ref[7], 0.0)
+    np.testing.assert_allclose(du, gains.K[7] @ e, rtol=1e-12)
+    assert ctrl.last is not None and ctrl.last.u is not None and np.array_equal(ctrl.last.u, u)
 
 
 def test_integral_action_removes_steady_mean_error_under_mismatch(standin, cfg):
@@ -259,3 +295,120 @@ def test_integral_action_removes_steady_mean_error_under_mismatch(standin, cfg):
         u, _, _ = ctrl2.control(j, theta)
         theta = plant.step(theta, u)
     assert abs(float(standin.c_m @ theta) - T_ref) > 1.0
+
+
+# ------------------------------------------------------------------ anti-windup at its edges
+# Remark 5: delta = 0 iff 1^T u > delta0 (strictly); the clamp rule: delta = 0 iff no group can follow
+# the integrator's push (sign of k_int * e): at u = 1 while pushed up, at u = 0 while pushed down.
+ONE_ULP_ABOVE_2 = np.nextafter(2.0, 3.0)
+
+
+@pytest.mark.parametrize(
+    ("u", "delta"),
+    [([0.5, 0.5, 1.0], 1.0), ([0.5, 0.5, ONE_ULP_ABOVE_2 - 1.0], 0.0), ([0.5, 0.5, 0.9], 1.0), ([1.0, 1.0, 1.0], 0.0)],
+    ids=["sum-at-delta0", "sum-above", "sum-below", "all-full"],
+)
+def test_remark5_total_power_threshold(u, delta) -> None:
+    u = np.array(u)
+    assert anti_windup_delta(u, 2.0) == delta
+    # the controller's rule applies the same threshold to the applied (clipped) input; a 1 K error
+    # pushed upwards by a group below 1 would otherwise keep the integrator running
+    assert integrator_delta(u, u - 0.01, np.array([1.0, 1.0, 1.0]), -1.0, 2.0) == delta
+
+
+@pytest.mark.parametrize(
+    ("u_raw", "k_int", "error", "delta"),
+    [
+        ([1.0, 1.0], [-1.0, -1.0], -1.0, 0.0),  # too cold, pushed up, both at exactly 1: frozen
+        ([1.0, np.nextafter(1.0, 0.0)], [-1.0, -1.0], -1.0, 1.0),  # one ulp below 1: that group follows
+        ([1.3, 0.99], [-1.0, -1.0], -1.0, 1.0),  # one group clipped, the other can follow
+        ([1.3, 1.1], [-1.0, 0.0], -1.0, 0.0),  # the free group is not pushed (k_int = 0)
+        ([1.3, 0.5], [-1.0, 0.0], -1.0, 0.0),  # nor is a group in the middle of its range that k_int ignores
+        ([-0.3, 0.5], [-1.0, 0.0], 1.0, 0.0),  # the same, pushed down with the pushed group at 0
+        ([1.3, 1.1], [-1.0, -1.0], 1.0, 1.0),  # too hot: pushed down, groups at 1 can follow
+        ([0.0, 0.0], [-1.0, -1.0], 1.0, 0.0),  # too hot, both at exactly 0: frozen
+        ([0.0, np.nextafter(0.0, 1.0)], [-1.0, -1.0], 1.0, 1.0),  # one ulp above 0 follows
+        ([-0.2, -0.1], [-1.0, -1.0], -1.0, 1.0),  # below 0 but pushed up: can follow
+        ([-0.2, -0.1], [1.0, 1.0], -1.0, 0.0),  # k_int > 0: a cold error pushes down, both at 0: frozen
+        ([1.3, 1.1], [-1.0, -1.0], 0.0, 1.0),  # no error: nothing to integrate, never frozen
+    ],
+)
+def test_clamp_rule_at_the_input_bounds(u_raw, k_int, error, delta) -> None:
+    u_raw = np.array(u_raw)
+    u = np.clip(u_raw, 0.0, 1.0)
+    assert integrator_delta(u, u_raw, np.array(k_int), error, 10.0) == delta  # delta0 out of reach
+
+
+def _one_step(standin, cfg, u_level, offset, delta0, e_I=0.0):
+    plan = _constant_plan(standin, np.full(standin.m, u_level), 5)
+    gains = lqg_gains(standin, plan, cfg)
+    out, new = feedback_control(gains, plan, standin.c_m, delta0, 0, plan.theta_ref[0] + offset,
+                                IntegratorState(e_I))
+    return plan, gains, out, new
+
+
+def test_feedback_control_integrates_exactly_at_the_threshold_and_freezes_above(standin, cfg) -> None:
+    # a 0.5 K error: no group is clipped, so only Remark 5 decides; the applied sum is the threshold
+    plan, gains, out, new = _one_step(standin, cfg, 0.6, -0.5, 10.0, e_I=3.0)
+    total = float(out.u.sum())
+    _, _, at, at_new = _one_step(standin, cfg, 0.6, -0.5, total, e_I=3.0)
+    assert at.delta == 1.0 and at_new.e_I == pytest.approx(3.0 + plan.t_s * at.mean_error, rel=1e-12)
+    assert at.mean_error == pytest.approx(-0.5, rel=1e-9) and not at_new.frozen
+    _, _, above, above_new = _one_step(standin, cfg, 0.6, -0.5, np.nextafter(total, 0.0), e_I=3.0)
+    assert above.delta == 0.0 and above_new.e_I == 3.0 and above_new.frozen
+    # the integrator state enters the feedback: Delta u = K_j [theta_hat - theta_ref; e_I] (eq. 25)
+    np.testing.assert_allclose(above.du, gains.K[0] @ np.append(np.full(standin.n, -0.5), 3.0), rtol=1e-12)
+
+
+@pytest.mark.parametrize("every", [1, 3])
+def test_gains_use_delta_of_the_feedforward_at_every_sample(standin, cfg, every) -> None:
+    """The recursion (26), (29) with delta(u_ff,j) of Remark 5 in Phi~_j (24), written out here.
+
+    u_ff alternates between a total above and below delta0; Phi_j, Gamma_j are held over 3 samples
+    (jacobian_every = 3), so the design must switch delta inside a hold.
+    """
+    N = 12
+    c = small_config().with_overrides({"lqg.delta0": 1.5})
+    u_lo, u_hi = np.full(standin.m, 0.4), np.full(standin.m, 0.6)  # totals 1.2 and 1.8 around 1.5
+    u_ff = np.array([u_hi if j % 2 else u_lo for j in range(N)])
+    theta = [steady_state(standin, u_lo, np.full(standin.n, 900.0))]
+    for j in range(N):
+        theta.append(standin.step(theta[-1], u_ff[j]))
+    theta = np.array(theta)
+    T = theta @ standin.c_m
+    plan = FeedforwardPlan(np.arange(N + 1) * standin.t_s, u_ff, theta, T, T, "alternating", 0, 0.0, True)
+    t0 = time.perf_counter()
+    gains = lqg_gains(standin, plan, c, jacobian_every=every)
+    assert gains.jacobian_every == every and 0.0 < gains.design_s <= time.perf_counter() - t0
+
+    w = c.lqg
+    Q = weight_matrix(standin.c_m, w.q0, w.q1)
+    Pt_N, Gt_N = augmented_system(standin.jac_theta(theta[N], u_ff[-1]), standin.jac_u(theta[N], u_ff[-1]),
+                                  standin.c_m, standin.t_s, 1.0)  # terminal design: delta = 1
+    P = dare(Pt_N, Gt_N, Q, w.r0)
+    np.testing.assert_allclose(gains.P_terminal, P, rtol=1e-12)
+    expected = np.empty_like(gains.K)
+    for j in range(N - 1, -1, -1):
+        jj = (j // every) * every
+        delta = 0.0 if u_ff[j].sum() > 1.5 else 1.0
+        Pt, Gt = augmented_system(standin.jac_theta(theta[jj], u_ff[jj]), standin.jac_u(theta[jj], u_ff[jj]),
+                                  standin.c_m, standin.t_s, delta)
+        P, expected[j] = riccati_step(P, Pt, Gt, Q, w.r0)
+    np.testing.assert_allclose(gains.K, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
+    if every == 1:  # the default is a Jacobian at every sample
+        np.testing.assert_array_equal(lqg_gains(standin, plan, c).K, gains.K)
+    # delta matters: with the integrator row switched off the integral gain changes
+    assert np.abs(gains.K[1][:, -1] - gains.K[0][:, -1]).max() > 1e-6 * np.abs(gains.K[0][:, -1]).max()
+
+
+def test_gain_lookup_beyond_the_plan_is_the_terminal_gain() -> None:
+    K = np.arange(3.0)[:, None, None] * np.ones((3, 2, 4))
+    gains = Gains(K, np.full((2, 4), 9.0), np.eye(4))
+    assert gains.at(0)[0, 0] == 0.0 and gains.at(2)[0, 0] == 2.0
+    assert gains.at(3)[0, 0] == 9.0 and gains.at(-1)[0, 0] == 9.0 and gains.jacobian_every == 1
+
+
+def test_dare_without_a_stabilising_solution_raises() -> None:
+    # x+ = 2 x, and the input cannot act on it (B = 0): no feedback stabilises it
+    with pytest.raises(RiccatiError), np.errstate(over="ignore", invalid="ignore"):  # the iterates blow up
+        dare(np.array([[2.0]]), np.array([[0.0]]), np.array([[1.0]]), 1.0)

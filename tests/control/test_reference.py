@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from controller_standin import make_standin
+from hypothesis import given
+from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from twin.config import small_config
@@ -78,9 +80,10 @@ def test_non_increasing_times_are_rejected():
     with pytest.raises(ValidationError, match="strictly increasing"):
         PointsReference(points=[(10.0, 500.0), (10.0, 600.0)])
     # a spec that bypassed validation still gets a clear error from the reference itself
-    bad = PointsReference.model_construct(points=[(10.0, 500.0), (5.0, 600.0)])
-    with pytest.raises(ReferenceError, match="strictly increasing"):
-        reference_trajectory(bad, 300.0)
+    for points in ([(10.0, 500.0), (5.0, 600.0)], [(10.0, 500.0), (10.0, 600.0)]):  # decreasing, repeated
+        bad = PointsReference.model_construct(points=points)
+        with pytest.raises(ReferenceError, match="strictly increasing"):
+            reference_trajectory(bad, 300.0)
 
 
 def test_unreachable_temperatures_are_rejected():
@@ -120,4 +123,119 @@ def test_steady_state_of_nonlinear_standin_is_fixed_point():
     u = np.full(model.m, 0.5)
     theta = steady_state(model, u, np.full(model.n, 700.0))
     # Newton tolerance 1e-6 K; one more step of the model moves it by t_s |f| << 1e-6 K
+    assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6
+
+
+SURROUNDINGS = ("housing.temperature", "reflector.temperature", "holders.temperature_upper",
+                "holders.temperature_lower", "inert_gas.temperature_top", "inert_gas.temperature_bottom")
+
+
+@pytest.mark.parametrize("field", SURROUNDINGS)
+def test_each_surrounding_can_be_the_coldest(field):
+    cfg = small_config().with_overrides({field: 251.0})  # colder than every other surface of the furnace
+    assert coldest_surrounding(cfg) == 251.0
+
+
+def test_reachable_range_is_closed_and_named_in_the_error():
+    lo, hi = 320.0, 1150.0
+    # the ends themselves are reachable
+    assert reference_trajectory(TransitionReference(setpoint=hi), 400.0, T_range=(lo, hi)).T_final == hi
+    assert reference_trajectory(PointsReference(points=[(10.0, lo)]), 400.0, T_range=(lo, hi)).T_final == lo
+    with pytest.raises(ReferenceError, match="setpoint 1150.1 K is unreachable"):
+        reference_trajectory(TransitionReference(setpoint=1150.1), 400.0, T_range=(lo, hi))
+    with pytest.raises(ReferenceError, match="reference point temperature 319.9 K is unreachable"):
+        reference_trajectory(PointsReference(points=[(10.0, 319.9)]), 400.0, T_range=(lo, hi))
+
+
+def test_initial_temperature_and_start_time_are_checked():
+    for bad in (0.0, -5.0, float("inf")):
+        with pytest.raises(ReferenceError, match="initial mean temperature"):
+            reference_trajectory(TransitionReference(), bad)
+    assert reference_trajectory(TransitionReference(), 0.5).T_initial == 0.5  # any positive kelvin
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ReferenceError, match="t_start"):
+            reference_trajectory(TransitionReference(), 300.0, t_start=bad)
+
+
+def test_points_starting_after_the_start_rise_from_the_initial_mean_at_once():
+    # first point at 0.5 s: the curve starts at T_initial at t_start and is already moving at 0.25 s
+    ref = reference_trajectory(PointsReference(points=[(0.5, 700.0)]), 300.0, t_start=4.0)
+    assert ref.t_start == 4.0 and ref(np.array([4.0]))[0] == 300.0
+    assert 300.0 < ref(np.array([4.25]))[0] < 700.0
+    assert ref(np.array([4.5]))[0] == 700.0
+    # a single point at 0 s is a step to a constant: no transition at all
+    flat = reference_trajectory(PointsReference(points=[(0.0, 800.0)]), 300.0, t_start=7.0)
+    assert (flat.t_start, flat.t_end, flat.T_initial, flat.T_final) == (7.0, 7.0, 800.0, 800.0)
+
+
+def test_rate_is_zero_outside_the_transition_as_floats():
+    ref = reference_trajectory(TransitionReference(setpoint=900.0, t_E=50.0), 350.0, t_start=10.0)
+    r = ref.rate(np.array([0.0, 10.0, 60.0, 100.0]))
+    assert r.dtype == np.float64 and r.tolist() == [0.0, 0.0, 0.0, 0.0]
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+@st.composite
+def _monotone_points(draw):
+    """Strictly increasing times (s, relative) and monotone temperatures (K), rising or falling."""
+    n = draw(st.integers(1, 6))
+    gaps = draw(st.lists(st.floats(1.0, 60.0), min_size=n, max_size=n))
+    t0 = draw(st.sampled_from([0.0, 5.0]))
+    times = (t0 + np.cumsum(gaps) - gaps[0]).tolist()
+    steps = draw(st.lists(st.floats(0.0, 300.0), min_size=n, max_size=n))
+    sign = draw(st.sampled_from([1.0, -1.0]))
+    T_initial = draw(st.floats(260.0, 1290.0))
+    # within the scenario's admissible 250..1300 K (clipping keeps the data monotone)
+    temps = np.clip(T_initial + sign * np.cumsum(steps), 260.0, 1290.0).tolist()
+    return list(zip(times, temps, strict=True)), T_initial, draw(st.floats(0.0, 100.0))
+
+
+@given(_monotone_points())
+def test_points_reference_is_monotone_between_monotone_points_and_c1(case) -> None:
+    points, T_initial, t_start = case
+    ref = reference_trajectory(PointsReference(points=points), T_initial, t_start=t_start)
+    knots = [t_start + t for t, _ in points]
+    temps = np.array([T for _, T in points])
+    np.testing.assert_allclose(ref(np.array(knots)), temps, rtol=1e-13)  # through every point
+    t = np.linspace(t_start - 10.0, knots[-1] + 10.0, 4001)
+    T = ref(t)
+    d = np.diff(T)
+    rising = temps[-1] >= T_initial
+    tol = 1e-9 * np.abs(T).max()
+    assert (d >= -tol).all() if rising else (d <= tol).all()  # monotone data: no overshoot (Fritsch-Carlson)
+    lo, hi = min(T_initial, temps.min()), max(T_initial, temps.max())
+    assert T.min() >= lo - tol and T.max() <= hi + tol
+    # C1: no jump of value or slope at any knot, including the joins with the constants at both ends
+    gap = min([b - a for a, b in zip(knots, knots[1:], strict=False)] + [1.0])
+    jv, js = _c1_jumps(ref, sorted({t_start, *knots}), h=1e-6 * gap)
+    slope_scale = (hi - lo) / gap + 1.0
+    assert jv < 1e-9 * hi and js < 1e-3 * slope_scale
+    # the rate is the derivative of the curve (central differences, O(h^2))
+    tm = np.linspace(t_start, knots[-1], 50)[1:-1]
+    h = 1e-4 * gap
+    np.testing.assert_allclose(ref.rate(tm), (ref(tm + h) - ref(tm - h)) / (2 * h), atol=1e-4 * slope_scale)
+
+
+@given(st.floats(260.0, 1290.0), st.floats(301.0, 1300.0), st.floats(2.0, 600.0), st.floats(0.0, 500.0))
+def test_transition_is_monotone_c1_and_the_cubic_step(T0, T_E, t_E, t_start) -> None:
+    ref = reference_trajectory(TransitionReference(setpoint=T_E, t_E=t_E), T0, t_start=t_start)
+    s = np.linspace(0.0, 1.0, 101)
+    # the cubic Hermite step T0 + (T_E - T0)(3 s^2 - 2 s^3) (module docstring), by its formula
+    np.testing.assert_allclose(ref(t_start + s * t_E), T0 + (T_E - T0) * (3 * s**2 - 2 * s**3),
+                               rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(ref.rate(t_start + s[1:-1] * t_E),
+                               (T_E - T0) * 6 * s[1:-1] * (1 - s[1:-1]) / t_E, rtol=1e-9, atol=1e-12)
+    d = np.diff(ref(np.linspace(t_start - 1.0, t_start + t_E + 1.0, 1001)))
+    assert (np.sign(T_E - T0) * d >= -1e-9 * max(T0, T_E)).all()
+    jv, js = _c1_jumps(ref, [t_start, t_start + t_E], h=1e-6 * t_E)
+    assert jv < 1e-9 * max(T0, T_E) and js < 1e-3 * (abs(T_E - T0) / t_E + 1.0)
+
+
+def test_steady_state_that_does_not_converge_is_a_reference_error():
+    model = make_standin()
+    u = np.full(model.m, 0.5)
+    with pytest.raises(ReferenceError, match="steady state of the model did not converge in 1 iterations"):
+        steady_state(model, u, np.full(model.n, 300.0), max_iter=1)
+    # from a cold start far below the fixed point Newton's steps are capped at 500 K and still converge
+    theta = steady_state(model, u, np.full(model.n, 300.0))
     assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6

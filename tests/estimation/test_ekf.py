@@ -131,12 +131,45 @@ def test_absurd_reading_is_gated_and_the_filter_keeps_going(system, caplog) -> N
         assert np.linalg.eigvalsh(st.P).min() > 0
 
 
-def test_process_noise_formula() -> None:
-    M = np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 1.0], [0.0, 1.0, 2.0]])
-    q0, q1 = 0.5, 3.0
-    S = np.array([[4.0, 4.0, 1.0], [4.0, 4.0, 4.0], [1.0, 4.0, 4.0]])  # q1 sign(M) + 1 1^T by hand
-    np.testing.assert_allclose(process_noise(M, q0, q1), q0 * S @ S, rtol=1e-15)
-    assert np.linalg.eigvalsh(process_noise(M, q0, q1)).min() >= -1e-12  # square of a symmetric matrix
+def test_process_noise_worked_example() -> None:
+    """Q = q0 (q1 sign(M) + 1 1^T)^2 of section 3.2 worked by hand for a two-element 1D mesh.
+
+    Linear elements of length h on nodes 0, 1, 2: M = h/6 [[2, 1, 0], [1, 4, 1], [0, 1, 2]], so
+    sign(M) = [[1, 1, 0], [1, 1, 1], [0, 1, 1]].  With q1 = 2: S = 2 sign(M) + 1 1^T =
+    [[3, 3, 1], [3, 3, 3], [1, 3, 3]] and the matrix square (rows times columns, by hand)
+    S^2 = [[19, 21, 15], [21, 27, 21], [15, 21, 19]]; with q0 = 0.5, Q = S^2 / 2.
+    (The element-wise square would give [[9, 9, 1], ...]: a different, wrong reading.)
+    """
+    M = 0.01 / 6 * np.array([[2.0, 1.0, 0.0], [1.0, 4.0, 1.0], [0.0, 1.0, 2.0]])
+    Q = process_noise(M, 0.5, 2.0)
+    np.testing.assert_array_equal(Q, [[9.5, 10.5, 7.5], [10.5, 13.5, 10.5], [7.5, 10.5, 9.5]])
+
+
+def test_process_noise_of_the_fe_mesh_in_closed_form(small_radiation) -> None:
+    """The Estimator's Q on the real FE mass matrix against the equation expanded by neighbour counts.
+
+    With A = sign(M) (nodes sharing an element, diagonal included; M >= 0 entry-wise) and
+    d_i = sum_k A_ik the number of such neighbours of node i, (q1 A + 1 1^T)^2 =
+    q1^2 A^2 + q1 (d 1^T + 1 d^T) + n 1 1^T.  (A^2)_ij counts the nodes adjacent to both i and j.
+    """
+    from twin.config import small_config
+    from twin.estimation.ekf import Estimator
+    from twin.model.discrete import discrete_model
+
+    cfg = small_config()
+    est = Estimator(discrete_model(cfg, small_radiation, None), cfg, 900.0)
+    M = est.model.fe.M
+    A = (M != 0).astype(float)
+    d = A.sum(axis=1)
+    n = len(d)
+    q0, q1 = cfg.ekf.q0, cfg.ekf.q1
+    expected = q0 * (q1**2 * (A @ A) + q1 * (d[:, None] + d[None, :]) + n)
+    np.testing.assert_allclose(est.Q, expected, rtol=1e-12)
+    # bilinear elements: a corner node touches 4 nodes, an interior one 9 (a 3 x 3 stencil)
+    nx = len(cfg.fe.x_nodes)
+    assert d[0] == 4 and d[nx + 1] == 9
+    np.testing.assert_array_equal(est.R, cfg.ekf.r0 * np.eye(3))  # R = r0 I (section 3.2)
+    np.testing.assert_array_equal(est.state.P, cfg.ekf.p0 * np.eye(n))  # P_0 = p0 I
 
 
 def test_all_readings_beyond_the_gate_means_the_estimate_is_wrong(system, caplog) -> None:
@@ -198,6 +231,7 @@ def test_jacobian_is_reused_until_a_node_moves_more_than_the_tolerance(small_rad
 
     predict_at(0.0)
     predict_at(0.9 * tol)
+    predict_at(tol)  # exactly at the tolerance (2 K: 900 + 2 is exact in floating point) still counts as within
     assert len(calls) == 1  # within the tolerance: the cached Phi is used
     predict_at(1.1 * tol)
     assert len(calls) == 2 and np.allclose(calls[-1], theta0 + 1.1 * tol)

@@ -72,7 +72,12 @@ def test_every_lamp_is_addressable(plant, cfg):
 
 
 def test_energy_balance_over_an_oscillating_run(plant):
-    """Change of stored enthalpy = integral of absorbed - emitted - convective - holder, within 0.5 %."""
+    """Change of stored enthalpy = integral of absorbed - emitted - convective - holder, within 0.5 %.
+
+    This checks the time stepping against the plant's own bookkeeping (both use the same P1, P2);
+    the radiation terms themselves are checked from the exchange factors, lamp by lamp and position
+    by position, in tests/radiation/test_exchange_properties.py.
+    """
     eta = eta_function(OSC)
     state = plant.start(np.full(plant.n, 300.0))
     E0 = stored_energy(plant, state.T)
@@ -215,8 +220,73 @@ def test_single_precision_radiation_changes_trajectories_negligibly(cfg, small_r
     np.testing.assert_allclose(a, b, atol=1e-3)
 
 
-def test_plant_rtf_runs(cfg, small_radiation):
-    from twin.runs.bench import plant_rtf
+def test_plant_rtf_times_the_papers_oscillating_run(cfg, small_radiation, monkeypatch):
+    """plant_rtf runs what its docstring says and divides simulated by wall time (a fake clock)."""
+    from types import SimpleNamespace
 
-    # timing is the bench's business; here only that it runs and returns a rate
-    assert plant_rtf(cfg, small_radiation, duration=1.0) > 0.0
+    import twin.runs.bench as bench
+
+    calls = []
+    advance = Plant.advance
+
+    def spy(self, state, u, dt, eta_of_t, *args, **kwargs):
+        calls.append((np.array(u, copy=True), dt, eta_of_t))
+        return advance(self, state, u, dt, eta_of_t, *args, **kwargs)
+
+    ticks = iter([100.0, 104.0])  # the timed loop starts at 100 s and ends at 104 s of the fake clock
+    monkeypatch.setattr(Plant, "advance", spy)
+    monkeypatch.setattr(bench, "time", SimpleNamespace(perf_counter=lambda: next(ticks)))
+    rate = bench.plant_rtf(cfg, small_radiation, duration=2.0)
+    assert rate == pytest.approx(2.0 / 4.0)  # 2 simulated s in 4 wall s
+    t_s = cfg.sampling.t_s
+    assert len(calls) == 5 + round(2.0 / t_s)  # 5 warm-up steps, then one advance per sample
+    u, dt, eta = calls[-1]
+    np.testing.assert_array_equal(u, np.full(cfg.n_groups, 0.6))
+    assert dt == t_s
+    # eta = 3 L_h sin(2 pi t / 18 s), capped at eta_max: the amplitude at a quarter period
+    assert eta(4.5) == pytest.approx(min(3 * cfg.lamps.horizontal.pitch, cfg.oscillation.eta_max), rel=1e-12)
+
+
+@pytest.mark.parametrize("method", ["rk4", "heun", "ab2"])
+def test_one_sub_step_is_the_textbook_step(cfg, small_radiation, method):
+    """advance over dt = max_substep is one step of the method, written out with the plant's rhs (eqs. 1-6):
+    RK4 and Heun by their Butcher tableaux; AB2 starts with Heun and continues with
+    T2 = T1 + h (3/2 f(T1) - 1/2 f(T0)), the history's lamp term re-evaluated for a changed input."""
+    plant = Plant(cfg, small_radiation, method=method, radiation_dtype=np.float64)
+    T0 = np.random.default_rng(8).uniform(700.0, 900.0, plant.n)
+    eta = eta_function(OSC)
+    h = 0.05  # s, well inside the stability limit (so one sub-step covers dt)
+
+    def f(t, T, u=U):
+        return plant.rhs(T, u, eta(t))
+
+    if method == "rk4":
+        k1 = f(0.0, T0)
+        k2 = f(h / 2, T0 + h / 2 * k1)
+        k3 = f(h / 2, T0 + h / 2 * k2)
+        k4 = f(h, T0 + h * k3)
+        expected = T0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    else:
+        k1 = f(0.0, T0)
+        expected = T0 + h / 2 * (k1 + f(h, T0 + h * k1))
+    state = plant.advance(plant.start(T0), U, h, eta, max_substep=h)
+    assert state.t == h
+    np.testing.assert_allclose(state.T, expected, rtol=1e-13, atol=0)
+    if method == "ab2":
+        U2 = np.array([0.2, 0.9, 0.1, 0.8, 0.3, 0.6])  # the held input changes between the samples
+        T2 = plant.advance(state, U2, h, eta, max_substep=h).T
+        expected2 = state.T + h * (1.5 * f(h, state.T, U2) - 0.5 * f(0.0, T0, U2))
+        np.testing.assert_allclose(T2, expected2, rtol=1e-12, atol=0)
+
+
+def test_simulate_records_every_sample(cfg, small_radiation):
+    plant = Plant(cfg, small_radiation)
+    eta = eta_function(OSC)
+    T0 = np.full(plant.n, 650.0)
+    ts, states = plant.simulate(T0, lambda t: U * (t < 0.25), eta, 0.5, 0.1)
+    np.testing.assert_allclose(ts, [0.0, 0.1, 0.2, 0.3, 0.4, 0.5], atol=1e-15)
+    np.testing.assert_array_equal(states[0], T0)
+    state = plant.start(T0)
+    for j in range(5):  # the same as advancing sample by sample with the input of each sample
+        state = plant.advance(state, U * (ts[j] < 0.25), 0.1, eta)
+        np.testing.assert_array_equal(states[j + 1], state.T)

@@ -70,6 +70,21 @@ def test_noise_is_seeded_and_has_the_given_spread():
     assert abs(np.mean(a - 1000.0)) < 0.15
 
 
+def test_readings_are_the_field_plus_noise_times_standard_normal_draws():
+    """y = H T + noise * N(0, 1) with the generator's own draws, in order; no noise: no draw at all."""
+    cfg = small_config()
+    T = np.random.default_rng(3).uniform(600.0, 1000.0, cfg.specimen.n_states)
+    tcs = Thermocouples(cfg, cfg.tc_positions())
+    exact = tcs.true_values(T)
+    got = tcs.read(T, np.random.default_rng(11), noise=0.5)
+    np.testing.assert_allclose(got, exact + 0.5 * np.random.default_rng(11).standard_normal(4), rtol=1e-15)
+    rng = np.random.default_rng(11)
+    np.testing.assert_array_equal(tcs.read(T, rng, noise=0.0), exact)
+    # the generator was not touched: the noise of the next reading does not depend on noise-free reads
+    assert rng.standard_normal() == np.random.default_rng(11).standard_normal()
+    assert tcs.positions.shape == (4, 2)
+
+
 def test_outside_the_plate_is_an_error():
     cfg = small_config()
     with pytest.raises(ValueError, match="outside"):

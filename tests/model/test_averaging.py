@@ -61,3 +61,95 @@ def test_averaged_matrices_equal_the_time_average_of_interpolated_tables() -> No
     # same quadrature bound as above times max |P| ~ 3 and 5 terms
     np.testing.assert_allclose(P1, np.tensordot(ref, tables.P1, axes=1), atol=2e-5)
     np.testing.assert_allclose(P2, np.tensordot(ref, tables.P2, axes=1), atol=2e-5)
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@st.composite
+def _tables_and_amplitudes(draw):
+    """Increasing table positions (not necessarily symmetric or equally spaced) and an admissible amplitude."""
+    n = draw(st.integers(2, 15))
+    gaps = np.array(draw(st.lists(st.floats(0.1, 1.0), min_size=n - 1, max_size=n - 1)))
+    left = draw(st.floats(0.05, 0.95))  # fraction of the span on the negative side
+    nodes = np.concatenate([[0.0], np.cumsum(gaps)])
+    nodes = 0.06 * (nodes / nodes[-1] - left)  # span 0.06 m, eta = 0 inside
+    a_max = min(-nodes[0], nodes[-1])
+    amplitude = draw(st.floats(0.0, 1.0)) * a_max
+    return nodes, amplitude
+
+
+@given(_tables_and_amplitudes())
+def test_weights_are_a_probability_with_the_motions_moments(case) -> None:
+    """For any amplitude: w_n >= 0, sum w_n = 1, and the moments of the arcsine law.
+
+    Linear interpolation reproduces linear functions, so sum w_n eta_n is the time mean of
+    a sin(.), 0; it over-estimates the convex eta^2 by at most (max gap)^2 / 4 above the true
+    mean square a^2 / 2.
+    """
+    nodes, a = case
+    w = oscillation_weights(nodes, a)
+    assert (w >= 0).all()
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    assert abs(w @ nodes) <= 1e-12 * np.ptp(nodes) + 1e-15
+    second = w @ nodes**2
+    assert a**2 / 2 - 1e-15 <= second <= a**2 / 2 + np.max(np.diff(nodes)) ** 2 / 4 + 1e-15
+    # only the nodes of the intervals the motion visits carry weight
+    reach = (nodes >= -a - 1e-15) | np.r_[nodes[1:] >= -a, True]
+    reach &= (nodes <= a + 1e-15) | np.r_[True, nodes[:-1] <= a]
+    assert (w[~reach] == 0).all()
+
+
+@given(_tables_and_amplitudes(), st.floats(0.0, 1.0))
+def test_hat_weights_interpolate_linear_functions_exactly(case, s) -> None:
+    nodes = case[0]
+    eta = nodes[0] + s * np.ptp(nodes)
+    w = hat_weights(nodes, eta)
+    assert (w >= 0).all() and w.sum() == pytest.approx(1.0, abs=1e-15)
+    assert np.count_nonzero(w) <= 2
+    assert w @ nodes == pytest.approx(eta, abs=1e-15)
+
+
+# ------------------------------------------------------------------ the interpolation in eta at its edges
+def test_hat_interval_at_and_beyond_the_table_ends() -> None:
+    from twin.physics.motion import TABLE_TOLERANCE, hat_interval
+
+    nodes = [-0.05, -0.025, 0.0, 0.025, 0.05]
+    assert hat_interval(nodes, -0.05) == (0, 0.0)
+    assert hat_interval(nodes, 0.05) == (3, 1.0)  # the last interval, at its right end
+    k, w = hat_interval(nodes, 0.0125)
+    assert k == 2 and w == pytest.approx(0.5, rel=1e-12)
+    assert hat_interval(nodes, 0.025) == (3, 0.0)  # on a node: the interval that starts there
+    # round-off beyond an end (within TABLE_TOLERANCE of the span, at least 1 m x tol) counts as the end
+    tiny = 0.5 * TABLE_TOLERANCE
+    assert hat_interval(nodes, 0.05 + tiny) == (3, 1.0) and hat_interval(nodes, -0.05 - tiny) == (0, 0.0)
+    for eta in (0.05 + 3 * TABLE_TOLERANCE, -0.05 - 3 * TABLE_TOLERANCE, 0.3):
+        with pytest.raises(ValueError, match="outside the exchange-factor table"):
+            hat_interval(nodes, eta)
+    # a one-node table (no oscillation) is position independent
+    assert hat_interval([0.0], 0.7) == (0, 0.0)
+    np.testing.assert_array_equal(hat_weights([0.0], 0.0), [1.0])
+
+
+def test_eta_function_starts_at_t0_moving_up() -> None:
+    from twin.physics.motion import eta_function
+
+    spec = OscillationSpec(enabled=True, amplitude=0.03, period=4.0)
+    eta = eta_function(spec, t0=10.0)
+    assert eta(10.0) == 0.0 and eta(11.0) == pytest.approx(0.03, rel=1e-12)
+    assert eta(12.0) == pytest.approx(0.0, abs=1e-15)
+    assert eta(13.0) == pytest.approx(-0.03, rel=1e-12) and eta(9.0) == pytest.approx(-0.03, rel=1e-12)
+    # a zero amplitude or a disabled spec holds the specimen at eta = 0 whatever the period
+    assert eta_function(OscillationSpec(enabled=True, amplitude=0.0, period=4.0))(1.0) == 0.0
+    assert eta_function(OscillationSpec(enabled=False, amplitude=0.03, period=4.0))(1.0) == 0.0
+
+
+def test_amplitude_up_to_the_table_end_is_accepted() -> None:
+    nodes = np.linspace(-0.04, 0.05, 10)  # an asymmetric table: the shorter side (0.04 m) limits
+    assert oscillation_weights(nodes, 0.04).sum() == pytest.approx(1.0, abs=1e-12)
+    with pytest.raises(ValueError, match="exceeds"):
+        oscillation_weights(nodes, 0.0401)
+    # a negative amplitude is no oscillation: the fixed specimen's weights
+    np.testing.assert_array_equal(oscillation_weights(nodes, -0.01), hat_weights(nodes, 0.0))

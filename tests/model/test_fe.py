@@ -173,3 +173,11 @@ def test_edge_terms_match_the_boundary_conditions(fe: FEModel) -> None:
     loss += ig.alpha * np.sum(wx * g(xs, 0.0) * (f(xs, 0.0) - T_ig))
     loss += ig.alpha * np.sum(wx * g(xs, s.width) * (f(xs, s.width) - T_ig))
     assert tg @ fe.gamma(tf) == pytest.approx(-loss, rel=EXACT)
+
+
+def test_hat_functions_vanish_outside_the_mesh() -> None:
+    from twin.model.fe import hat_functions
+
+    nodes = np.array([0.0, 0.1, 0.3])
+    np.testing.assert_array_equal(hat_functions(nodes, [-0.05, 0.35]), np.zeros((2, 3)))  # documented: zero outside
+    np.testing.assert_allclose(hat_functions(nodes, [0.0, 0.2, 0.3]), [[1, 0, 0], [0, 0.5, 0.5], [0, 0, 1]])

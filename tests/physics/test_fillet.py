@@ -8,6 +8,8 @@ of the vectorised overlap in the code.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -85,3 +87,48 @@ def test_sup_and_spread() -> None:
     assert fillet.spread(field) == pytest.approx(44.0 - 44.0 * fillet.weights[8, 13], rel=1e-12)
     with pytest.raises(ValueError, match="does not fit"):
         fillet.mean(np.zeros((3, 3)))
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+
+
+@st.composite
+def _grids_and_fields(draw):
+    nx, ny = draw(st.integers(2, 30)), draw(st.integers(2, 20))
+    L, W = draw(st.floats(0.05, 2.0)), draw(st.floats(0.05, 2.0))
+    field = lambda: draw(arrays(float, (ny, nx), elements=st.floats(-1e3, 2e3)))  # noqa: E731
+    return nx, ny, L, W, field(), field(), draw(st.floats(-3.0, 3.0)), draw(st.floats(-3.0, 3.0))
+
+
+def _fillet(nx, ny, L, W):
+    return Fillet.on_grid((np.arange(nx) + 0.5) * L / nx, (np.arange(ny) + 0.5) * W / ny, L, W)
+
+
+@given(_grids_and_fields())
+def test_fillet_mean_is_linear_bounded_and_the_area_integral(case) -> None:
+    nx, ny, L, W, F, G, a, b = case
+    fillet = _fillet(nx, ny, L, W)
+    scale = 1e-12 * (np.abs(F).max() + np.abs(G).max() + 1.0)
+    assert fillet.mean(a * F + b * G) == pytest.approx(a * fillet.mean(F) + b * fillet.mean(G), abs=10 * scale)
+    # bounded by the extremes of the cells that overlap the fillet (a convex combination of them)
+    inside = F[fillet.weights > 0]
+    assert inside.min() - scale <= fillet.mean(F) <= inside.max() + scale
+    # the area integral of the cell-wise constant field over the fillet, divided by its area
+    cfg = SimpleNamespace(specimen=SimpleNamespace(length=L, width=W, nx=nx, ny=ny))
+    assert fillet.mean(F) == pytest.approx(_oracle_mean(cfg, F.ravel()), abs=10 * scale)
+    # a constant field is its own mean; T_sup of a field against itself is 0
+    assert fillet.mean(np.full((ny, nx), 812.5)) == pytest.approx(812.5, rel=1e-14)
+    assert fillet.sup(F, fillet.mean(F)) == fillet.spread(F)
+
+
+def test_batches_of_flat_fields() -> None:
+    cfg = small_config()
+    fillet = Fillet.of(cfg)
+    rng = np.random.default_rng(2)
+    T = rng.uniform(500.0, 900.0, (3, cfg.specimen.n_states))  # three fields in the state order (..., N_s)
+    np.testing.assert_allclose(fillet.mean(T), [_oracle_mean(cfg, row) for row in T], rtol=1e-13)
+    np.testing.assert_allclose(fillet.sup(T, np.array([600.0, 700.0, 800.0])),
+                               [fillet.sup(row, ref) for row, ref in zip(T, (600.0, 700.0, 800.0), strict=True)])

@@ -104,20 +104,73 @@ def test_integral_action_removes_the_mean_error_under_mismatch(small_radiation):
     assert m["true_mean_error_steady_max"] < 0.01, m
 
 
+def _terminal_gain_oracle(model, plan, cfg):
+    """K of the DARE at the plan's last point, by scipy's QZ solver (independent of the doubling in lqg.dare)."""
+    import scipy.linalg
+
+    from twin.control.lqg import augmented_system, weight_matrix
+
+    theta, u = plan.theta_ref[-1], plan.u_ff[-1]
+    Pt, Gt = augmented_system(model.jac_theta(theta, u), model.jac_u(theta, u), model.c_m, model.t_s, 1.0)
+    r0 = cfg.lqg.r0 * np.eye(model.m)
+    P = scipy.linalg.solve_discrete_are(Pt, Gt, weight_matrix(model.c_m, cfg.lqg.q0, cfg.lqg.q1), r0)
+    return -np.linalg.solve(r0 + Gt.T @ P @ Gt, Gt.T @ P @ Pt)
+
+
 def test_live_reference_and_oscillation_changes(small_radiation, plans):
-    loop = ClosedLoop(small_config(), _scenario(duration=30.0), small_radiation, plan_cache=plans)
+    """After each live change the model, the plan and the gains are the new ones, the estimate and e_I carry on."""
+    from twin.model.discrete import discrete_model
+
+    cfg = small_config()
+    loop = ClosedLoop(cfg, _scenario(duration=30.0), small_radiation, plan_cache=plans)
     for _ in range(50):
         loop.step()
+    old_K = loop.controller.gains.K_terminal.copy()
+    theta_now, e_I = loop.estimator.state.theta.copy(), loop.controller.state.e_I
     loop.set_reference(TransitionReference(setpoint=900.0, t_E=10.0))
+    plan = loop.controller.plan
+    # the new plan starts now (t = 5 s) from the estimate, heads for 900 K, and e_I carries over (with_plan)
+    assert plan.t0 == pytest.approx(5.0) and plan.T_ref[-1] == pytest.approx(900.0)
+    np.testing.assert_array_equal(plan.theta_ref[0], theta_now)
+    assert loop.controller.state.e_I == e_I
+    # the gains are those of the new plan: the terminal gain of its end point (scipy's DARE)
+    K_new = _terminal_gain_oracle(loop.controller.model, plan, cfg)
+    np.testing.assert_allclose(loop.controller.gains.K_terminal, K_new, rtol=1e-6, atol=1e-9 * np.abs(K_new).max())
+    assert np.abs(old_K - K_new).max() > 1e-3 * np.abs(K_new).max()  # and not the old ones (1000 K end)
     s = loop.step()
     assert any("reference changed" in e for e in s.events) and any("re-planned" in e for e in s.events)
     for _ in range(150):
         s = loop.step()
     assert s.T_ref == pytest.approx(900.0)  # 10 s after the change at t = 5 s, the new setpoint holds
-    loop.set_oscillation(OscillationSpec(enabled=True, amplitude=0.03, period=5.0))
+
+    spec = OscillationSpec(enabled=True, amplitude=0.03, period=5.0)
+    P_now, t_now = loop.estimator.state.P.copy(), loop.j * cfg.sampling.t_s  # 201 samples: 20.1 s
+    loop.set_oscillation(spec)
+    averaged = discrete_model(cfg, small_radiation, spec)  # eq. (11b), built independently of the loop
+    for model in (loop.estimator.model, loop.controller.model):  # the EKF and the LQG use the averaged model
+        assert model.oscillation == spec
+        np.testing.assert_allclose(model.B, averaged.B, rtol=1e-12)
+        np.testing.assert_allclose(model.A, averaged.A, rtol=1e-12)
+    fixed = discrete_model(cfg, small_radiation, None)
+    assert np.abs(loop.estimator.model.B - fixed.B).max() > 1e-3 * np.abs(fixed.B).max()
+    np.testing.assert_array_equal(loop.estimator.state.P, P_now)  # the estimate and its covariance are kept
+    plan = loop.controller.plan
+    assert plan.t0 == pytest.approx(t_now) and plan.T_ref[0] == pytest.approx(900.0)
+    K_osc = _terminal_gain_oracle(averaged, plan, cfg)
+    np.testing.assert_allclose(loop.controller.gains.K_terminal, K_osc, rtol=1e-6, atol=1e-9 * np.abs(K_osc).max())
     etas = [loop.step().eta for _ in range(30)]
     assert max(abs(e) for e in etas) > 0.02  # the specimen moves from the next sample on
-    assert loop.estimator is not None
+    # the EKF predicts with the averaged model: its prior is F_av(theta^+, u_j) (eq. 14)
+    seen = {}
+    predict = loop.estimator.predict
+
+    def spy(u):
+        seen["theta"], seen["u"] = loop.estimator.state.theta.copy(), np.array(u, copy=True)
+        return predict(u)
+
+    loop.estimator.predict = spy
+    loop.step()
+    np.testing.assert_allclose(loop.estimator.state.theta, averaged.step(seen["theta"], seen["u"]), rtol=1e-12)
 
 
 def test_background_replanning_does_not_stall_the_loop(small_radiation, plans):

@@ -2,13 +2,15 @@
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from twin.physics.fillet import Fillet
-from twin.runs.metrics import compute_metrics, window
+from twin.runs.metrics import METRIC_KEYS, compute_metrics, window
 
 
-def _series(n_t: int = 201, t_E: float = 10.0) -> dict:
-    t = np.linspace(0.0, 2 * t_E, n_t)
+def _series(n_t: int = 201, t_E: float = 10.0, t_end: float | None = None) -> dict:
+    t = np.linspace(0.0, 2 * t_E if t_end is None else t_end, n_t)
     x = (np.arange(26) + 0.5) * 0.4 / 26
     y = (np.arange(17) + 0.5) * 0.2 / 17
     T_ref = np.minimum(300 + 80 * t, 1100.0)
@@ -73,3 +75,101 @@ def test_stopped_run_gives_nan_for_missing_windows():
         ts[k] = ts[k][keep]
     m = compute_metrics(ts)
     assert np.isnan(m["mean_error_steady_max"]) and m["mean_error_transient_max"] == 0.0
+
+
+def test_each_metric_sees_only_its_window():
+    """Errors placed in one time span at a time, on a 0.05 s grid of a t_E = 10 s run that goes on to 2.5 t_E.
+
+    Spans (product.md windows): start (t < t_E / 10: transient only, not after-start; 0.95 s is in it),
+    between (t_E < t < 1.5 t_E: no window), steady (1.5..2 t_E), late (t > 2 t_E, a run longer than
+    2 t_E: no window but after-start).  An error outside a metric's window must not change it.
+    """
+    t = _series(n_t=501, t_E=10.0, t_end=25.0)["t"]
+    spans = {"start": t < 0.97, "between": (t > 10.02) & (t < 14.98), "steady": (t >= 15.0) & (t <= 20.0),
+             "late": t > 20.02}
+    expected_in = {  # metric -> spans it sees
+        "mean_error_transient_max": {"start"},
+        "mean_error_steady_max": {"steady"},
+        "tc123_error_max": {"between", "steady", "late"},
+        "tc4_error_transient_max": {"start"},
+        "tc4_error_steady_max": {"steady"},
+        "inhomogeneity_transient_max": {"start"},
+        "inhomogeneity_steady": {"steady"},
+        "true_inhomogeneity_steady": {"steady"},
+        "true_mean_error_steady_max": {"steady"},
+        "field_estimation_error_steady_max": {"steady"},
+    }
+    for span, sel in spans.items():
+        ts = _series(n_t=501, t_E=10.0, t_end=25.0)
+        ts["T_mean_hat"][sel] += 22.0  # 2 % of the 1100 K setpoint
+        ts["tc"][sel] += 22.0  # every TC, so TC1..3 and TC4
+        ts["field_hat"][sel, 8, 13] += 22.0  # fillet centre: 2 % sup-norm, 2 % estimation error
+        ts["field_true"][sel] += 22.0  # the whole true field: 2 % mean error and sup-norm
+        m = compute_metrics(ts)
+        for key, seen in expected_in.items():
+            assert m[key] == pytest.approx(0.02 if span in seen else 0.0, abs=1e-12), (span, key)
+
+
+def test_true_field_metrics_are_relative_and_nan_without_truth():
+    ts = _series()
+    ts["field_true"][:, 8, 13] += 44.0  # a hot spot of the true field in the fillet centre: 4 %
+    m = compute_metrics(ts)
+    assert m["true_inhomogeneity_steady"] == pytest.approx(0.04)
+    assert m["field_estimation_error_steady_max"] == pytest.approx(0.04)
+    # 44 K on one cell of the fillet: the true mean error is 44 K x that cell's area weight / 1100 K
+    w = Fillet.on_grid(ts["x"], ts["y"], ts["L_s"], ts["W_s"]).weights[8, 13]
+    assert m["true_mean_error_steady_max"] == pytest.approx(44.0 * w / 1100.0, rel=1e-12)
+    del ts["field_true"]  # a real furnace: no truth
+    m2 = compute_metrics(ts)
+    for k in ("true_inhomogeneity_steady", "true_mean_error_steady_max", "field_estimation_error_steady_max"):
+        assert np.isnan(m2[k]), k
+    assert {k: v for k, v in m2.items() if not np.isnan(v)} == {k: v for k, v in m.items() if "true" not in k
+                                                                and k != "field_estimation_error_steady_max"}
+
+
+def test_a_run_without_samples_gives_nan_everywhere():
+    ts = _series()
+    for k in ("t", "T_ref", "T_mean_hat", "tc", "tc_hat", "t_field", "field_hat", "field_true"):
+        ts[k] = ts[k][:0]
+    m = compute_metrics(ts)
+    assert set(m) == set(METRIC_KEYS) and all(np.isnan(v) for v in m.values()), m
+
+
+# ------------------------------------------------------------------ properties (hypothesis)
+TEMPERATURE_KEYS = ("T_ref", "T_mean_hat", "tc", "tc_hat", "field_hat", "field_true")
+
+
+def _perturbed(seed: int) -> dict:
+    """A series with errors everywhere: mean, TCs, estimated and true fields (deterministic in seed)."""
+    rng = np.random.default_rng(seed)
+    ts = _series(n_t=81, t_E=4.0)
+    n = ts["t"].size
+    ts["T_mean_hat"] = ts["T_mean_hat"] + rng.normal(0, 8, n)
+    ts["tc"] = ts["tc"] + rng.normal(0, 5, (n, 4))
+    ts["field_hat"] = ts["field_hat"] + rng.normal(0, 20, ts["field_hat"].shape)
+    ts["field_true"] = ts["field_true"] + rng.normal(0, 20, ts["field_true"].shape)
+    return ts
+
+
+@given(st.integers(0, 2**16), st.floats(-250.0, 600.0))
+def test_metrics_do_not_change_when_every_temperature_and_the_reference_shift_together(seed, shift) -> None:
+    """Every metric is a difference of two temperatures over the setpoint: a common offset cancels."""
+    ts = _perturbed(seed)
+    base = compute_metrics(ts)
+    shifted = dict(ts, **{k: ts[k] + shift for k in TEMPERATURE_KEYS})
+    again = compute_metrics(shifted)
+    assert all(np.isfinite(v) and v > 0 for v in base.values()), base  # every metric sees an error
+    for k, v in base.items():
+        # offsets of up to 1.7e3 K on errors of ~1e1 K: rounding ~1e-13 K over the 1100 K setpoint
+        assert again[k] == pytest.approx(v, rel=1e-9, abs=1e-12), k
+
+
+@given(st.integers(0, 2**16), st.floats(0.2, 5.0))
+def test_metrics_are_relative_to_the_setpoint(seed, factor) -> None:
+    """Scaling every temperature, the reference and the setpoint together leaves the relative errors."""
+    ts = _perturbed(seed)
+    base = compute_metrics(ts)
+    scaled = dict(ts, setpoint=ts["setpoint"] * factor, **{k: ts[k] * factor for k in TEMPERATURE_KEYS})
+    again = compute_metrics(scaled)
+    for k, v in base.items():
+        assert again[k] == pytest.approx(v, rel=1e-9), k
