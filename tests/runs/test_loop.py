@@ -13,7 +13,7 @@ from twin.config import small_config
 from twin.runs.loop import ClosedLoop
 from twin.runs.metrics import compute_metrics
 from twin.runs.runner import execute_run
-from twin.scenario import OscillationSpec, Scenario, TransitionReference
+from twin.scenario import PAPER_ESTIMATOR, OscillationSpec, Scenario, TransitionReference
 
 
 def _scenario(**kw) -> Scenario:
@@ -122,7 +122,9 @@ def test_live_reference_and_oscillation_changes(small_radiation, plans):
     from twin.model.discrete import discrete_model
 
     cfg = small_config()
-    loop = ClosedLoop(cfg, _scenario(duration=30.0), small_radiation, plan_cache=plans)
+    # the paper's estimator (averaged, no calibration): its model switches with the controller's
+    loop = ClosedLoop(cfg, _scenario(duration=30.0, estimator=PAPER_ESTIMATOR.model_dump()), small_radiation,
+                      plan_cache=plans)
     for _ in range(50):
         loop.step()
     old_K = loop.controller.gains.K_terminal.copy()
@@ -164,9 +166,9 @@ def test_live_reference_and_oscillation_changes(small_radiation, plans):
     seen = {}
     predict = loop.estimator.predict
 
-    def spy(u):
+    def spy(u, eta=0.0):
         seen["theta"], seen["u"] = loop.estimator.state.theta.copy(), np.array(u, copy=True)
-        return predict(u)
+        return predict(u, eta)
 
     loop.estimator.predict = spy
     loop.step()

@@ -142,6 +142,16 @@ class ParametricModel:
         return other
 
     @property
+    def A(self) -> Array:
+        """The radiation term A of eq. (12a) with the period-average weights (eq. 11), nominal parameters."""
+        return self._average.A
+
+    @property
+    def B(self) -> Array:
+        """The input matrix B of eq. (12a) with the period-average weights (eq. 11), nominal parameters."""
+        return self._average.B
+
+    @property
     def n(self) -> int:
         return self.tables.n
 
