@@ -1,7 +1,7 @@
 """The FastAPI app factory: REST API, websocket stream, dashboard page, optional viser view.
 
-One router per resource (``backend/routes``): health, furnace, runs, run files, run stream and
-the dashboard's page and files.  Everything they need comes from typed dependencies
+One router per resource (``backend/routes``): health, furnace, runs, run files, run stream, design
+studies and the dashboard's page and files.  Everything they need comes from typed dependencies
 (``backend/deps.py``); the run manager is the only way to the runs.
 
 >>> import tempfile
@@ -26,10 +26,12 @@ from fastapi.responses import JSONResponse
 from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
-from backend.routes import dashboard, docs, files, furnace, health, runs, stream
+from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
+    RequestConflict,
+    RunIsActive,
     RunManager,
     RunNotActive,
     RunNotFound,
@@ -38,6 +40,7 @@ from backend.run_manager import (
 from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
 from backend.security import SecurityMiddleware
 from backend.settings import Settings
+from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
 
@@ -46,11 +49,16 @@ log = logging.getLogger(__name__)
 ERRORS: dict[type[Exception], int] = {
     RunNotFound: status.HTTP_404_NOT_FOUND,
     RunNotActive: status.HTTP_409_CONFLICT,
+    RunIsActive: status.HTTP_409_CONFLICT,
+    RequestConflict: status.HTTP_409_CONFLICT,
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,
     LimitExceeded: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
     ChangeCancelled: status.HTTP_409_CONFLICT,
     InsufficientStorage: status.HTTP_507_INSUFFICIENT_STORAGE,
+    StudyNotFound: status.HTTP_404_NOT_FOUND,
+    StudyConflict: status.HTTP_409_CONFLICT,
+    StudyRejected: status.HTTP_422_UNPROCESSABLE_CONTENT,
 }
 
 
@@ -66,10 +74,12 @@ def create_app(
     loop_factory: LoopFactory | None = None,
     viser: bool = False,
     furnace_name: str | None = None,
+    study_runner: StudyRunner | None = None,
 ) -> FastAPI:
     """Build the app; the lifespan opens the database, marks crashed runs interrupted, and
     (with ``viser=True``) starts the 3D view on ``settings.viser_port``.  ``furnace_name`` labels
-    the furnace (``--config``); by default a shipped furnace's name or ``custom``."""
+    the furnace (``--config``); by default a shipped furnace's name or ``custom``.  ``study_runner``
+    replaces ``twin.studies.engine.run_study`` (tests of the studies API's plumbing)."""
     settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
     cfg = cfg or load_config()
     limits = scenario_limits(cfg, furnace_name)
@@ -83,6 +93,7 @@ def create_app(
                              event_loop=asyncio.get_running_loop())
         await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
         app.state.manager = manager
+        app.state.studies = StudyManager(settings, cfg, study_runner, furnace_name=limits.furnace)
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
@@ -99,6 +110,7 @@ def create_app(
             yield
         finally:
             await manager.shutdown()
+            await asyncio.to_thread(app.state.studies.shutdown)
             if scene is not None:
                 scene.stop()
             repo.close()
@@ -113,10 +125,10 @@ def create_app(
         redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, runs, files, stream, dashboard, docs):
+    for module in (health, furnace, glossary, runs, files, exports, stream, studies, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
-    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
     app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     return app

@@ -95,6 +95,7 @@ def stream_bench(cfg: FurnaceConfig, *, realtime_s: float = 10.0, max_speed_sim_
     """Measure the live stream of a real server; see the module docstring for the keys."""
     factory = DefaultLoopFactory()
     factory.radiation(cfg)  # load the cached exchange factors before timing anything
+    factory.truth_radiation(cfg)
     with tempfile.TemporaryDirectory(prefix="furnace-bench-") as tmp:
         settings = Settings(data_dir=Path(tmp), max_concurrent_runs=2, viser_port=0)  # type: ignore[call-arg]
         with ThreadedServer(create_app(settings, cfg, loop_factory=factory)) as srv:

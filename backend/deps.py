@@ -13,6 +13,7 @@ from pydantic import SkipValidation, ValidationError
 
 from backend.run_manager import RunManager
 from backend.settings import Settings
+from backend.study_manager import StudyManager
 from twin.limits import ScenarioLimits
 from twin.scenario import (
     OscillationSpec,
@@ -31,6 +32,11 @@ T = TypeVar("T")
 def get_settings(request: Request) -> Settings:
     settings: Settings = request.app.state.settings
     return settings
+
+
+def get_studies(request: Request) -> StudyManager:
+    studies: StudyManager = request.app.state.studies
+    return studies
 
 
 def get_manager(request: Request) -> RunManager:
@@ -59,6 +65,7 @@ def require_token(
 
 
 ManagerDep = Annotated[RunManager, Depends(get_manager)]
+StudiesDep = Annotated[StudyManager, Depends(get_studies)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 TokenDep = Depends(require_token)
 

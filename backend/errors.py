@@ -22,6 +22,8 @@ from fastapi import Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from backend.messages import plain_errors
+
 MAX_ECHO_CHARS = 200  # an echoed input longer than this is summarised
 MAX_ERRORS = 20  # errors reported per request (a 1000-point list can make 2000)
 
@@ -54,9 +56,10 @@ def _error(e: dict[str, Any]) -> dict[str, Any]:
 
 
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
-    """422 with FastAPI's shape (``detail``: loc, msg, type, input) and never a non-finite or long echo."""
+    """422 with FastAPI's shape (``detail``: loc, msg, type, input) and never a non-finite or long echo; the
+    messages in plain words, one per field (``backend.messages.plain_errors``: no pydantic wording)."""
     assert isinstance(exc, RequestValidationError)
-    errors = list(exc.errors())
+    errors = plain_errors(exc.errors())
     detail = [_error(e) for e in errors[:MAX_ERRORS]]
     if len(errors) > MAX_ERRORS:
         detail.append({"type": "too_many_errors", "loc": ["body"],

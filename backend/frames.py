@@ -4,7 +4,11 @@ Keys of the contract: ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K, fill
 estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``, ``tc_hat``
 (the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
 of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
-(unix s when the sample was computed, for latency), ``status`` and ``events``; with a calibrating
+(unix s when the sample was computed, for latency), ``status``, ``events`` (texts of the run's
+events since the previous frame), and from the server (``backend.run_manager``): ``event_log``
+(those events as ``{n, t, text, level}``, ``n`` their index in the run's event list, so a page
+that also read ``GET /api/runs/{id}/series`` shows each one once), ``spread`` (max over the fillet
+|T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).  With a calibrating
 estimator ``calibration`` ({name: {"value", "sigma"}}, relative deviations), with a shadow
 estimator ``shadow`` ({"T_mean_hat", "tc_hat", "field_delta": shadow minus estimate, N_y x N_x, K}).
 """
@@ -123,8 +127,16 @@ def _scalars(s: SnapshotLike) -> dict[str, Any]:
     }
 
 
+def frame_extra(s: SnapshotLike, fillet: Any) -> dict[str, Any]:
+    """What the server adds to a frame: ``spread`` (max over the fillet |T_hat - fillet mean|, K, with a
+    ``twin.physics.fillet.Fillet``) and ``saturated`` (+1 full power, -1 off, 0 between, per group)."""
+    from twin.control.saturation import bound_flags
+
+    return {"spread": finite_or_none(fillet.spread(s.field_hat)), "saturated": bound_flags(s.u).tolist()}
+
+
 def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
-               events: list[str] | None = None) -> dict[str, Any]:
+               events: list[str] | None = None, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample
     since the previous frame, so none is lost when samples are not streamed one by one)."""
     field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
@@ -141,6 +153,8 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
     if shadow_field is not None and "shadow" in frame:
         delta = np.round(np.asarray(shadow_field, dtype=float) - np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
         frame["shadow"]["field_delta"] = _grid(delta)
+    if extra:
+        frame.update(extra)
     return frame
 
 
@@ -150,10 +164,10 @@ def _grid(field: Any) -> list[list[float | None]]:
 
 
 def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,
-               events: list[str] | None = None) -> str:
+               events: list[str] | None = None, extra: dict[str, Any] | None = None) -> str:
     """The frame as JSON text, serialised once and sent to every client."""
-    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events),
-                      allow_nan=False, separators=(",", ":"))
+    return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events,
+                                 extra=extra), allow_nan=False, separators=(",", ":"))
 
 
 def json_safe(obj: Any) -> Any:

@@ -1,4 +1,5 @@
-"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model."""
+"""The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (the
+twin's and the simulated furnace's own, each loaded once per furnace)."""
 
 from __future__ import annotations
 
@@ -9,34 +10,46 @@ from typing import Any
 from backend.run_worker import LoopLike
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
-from twin.scenario import Reference, Scenario
+from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing one radiation model (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (loaded once, lazily)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
+        self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
+        self._models: dict[tuple[str, str], tuple[Any, tuple[float, float]]] = {}  # (model, hold range)
 
-    def radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
-        """The furnace's radiation model, loaded (or ray-traced) once; a run waiting for another caller's
+    def _shared(self, store: dict[str, Any], cfg: FurnaceConfig, load: Any, budget: PlanBudget | None) -> Any:
+        """``store[cfg]``, loaded (or ray-traced) once by ``load(cfg)``; a run waiting for another caller's
         computation stops waiting when its ``budget`` is cancelled (Stop while starting)."""
-        from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
-
         key = cfg.digest()
         while not self._lock.acquire(timeout=0.1):
             if budget is not None and budget.cancelled:
                 raise PlanCancelled("stopped while the radiation model was being computed")
         try:
-            if key not in self._radiation:
-                self._radiation[key] = radiation_model(cfg)
-            return self._radiation[key]
+            if key not in store:
+                store[key] = load(cfg)
+            return store[key]
         finally:
             self._lock.release()
+
+    def radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
+        """The twin's radiation model of the furnace (see :meth:`_shared`)."""
+        from twin.radiation import radiation_model  # type: ignore[attr-defined]  # lands with the radiation part
+
+        return self._shared(self._radiation, cfg, radiation_model, budget)
+
+    def truth_radiation(self, cfg: FurnaceConfig, budget: PlanBudget | None = None) -> Any:
+        """The simulated furnace's own table (``[truth.radiation]``), for runs whose truth is independent."""
+        from twin.furnace.simulated.truth import truth_radiation
+
+        return self._shared(self._truth_radiation, cfg, truth_radiation, budget)
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -65,6 +78,41 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
+    def model(self, cfg: FurnaceConfig, oscillation: OscillationSpec | None) -> tuple[Any, tuple[float, float]]:
+        """The twin's discrete model for ``oscillation`` (time-averaged if enabled, eq. 11) and its hold range
+        (``twin.control.feasibility.hold_range``), cached per furnace and oscillation."""
+        from twin.control.feasibility import hold_range
+        from twin.model.discrete import discrete_model
+
+        osc = oscillation if oscillation is not None and oscillation.enabled else None
+        key = (cfg.digest(), "fixed" if osc is None else osc.model_dump_json())
+        with self._lock:
+            known = self._models.get(key)
+        if known is None:
+            model = discrete_model(cfg, self.radiation(cfg), osc)
+            known = (model, hold_range(model, cfg))
+            with self._lock:
+                self._models[key] = known
+                while len(self._models) > 16:
+                    self._models.pop(next(iter(self._models)))
+        return known
+
+    def feasibility(self, cfg: FurnaceConfig, reference: Reference, duration: float,
+                    oscillation: OscillationSpec | None = None, T_initial: float | None = None,
+                    t_start: float = 0.0) -> Any:
+        """Can the furnace follow ``reference`` (``twin.control.feasibility.check_transition``) over a run of
+        ``duration`` s from ``t_start`` (a live change: from now at the current mean ``T_initial``)?
+        ``None`` if the model cannot be built (the run's own build then reports the problem)."""
+        from twin.control.feasibility import check_transition
+
+        try:
+            model, hold = self.model(cfg, oscillation)
+        except Exception:
+            log.exception("cannot build the model for the feasibility check; the reference is not checked")
+            return None
+        return check_transition(model, cfg, reference, duration=duration, T_initial=T_initial, t_start=t_start,
+                                hold=hold)
+
     def check_plan(self, cfg: FurnaceConfig, scenario: Scenario, budget: PlanBudget) -> None:
         """Raise ``twin.control.budget.PlanTooLarge`` (a ``ValueError``) if the run's first plan is estimated
         beyond ``budget``'s time or memory, so ``POST /api/runs`` answers 422 that says why."""
@@ -78,9 +126,12 @@ class DefaultLoopFactory:
         plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
 
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
+        from twin.furnace.simulated import SimulatedFurnace
         from twin.runs.loop import ClosedLoop
 
         # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=self.radiation(cfg, budget), background=True,
-                                    budget=budget)
+        rad = self.radiation(cfg, budget)
+        own = self.truth_radiation(cfg, budget) if scenario.truth == "independent" else None
+        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
+        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True, budget=budget)
         return loop

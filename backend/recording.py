@@ -13,6 +13,8 @@ One :class:`rerun.RecordingStream` per run, saved to its file before anything is
 - ``eta`` (m), ``inhomogeneity/estimated`` and ``inhomogeneity/true`` (K);
 - with a calibrating estimator ``calibration/<parameter>`` (relative deviation) and
   ``calibration/<parameter>_sigma``; with a shadow estimator ``tc/error_shadow/TC1..4`` (K).
+- ``events``: the run's events (start, live changes, re-plans, saturated groups, feasibility
+  warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time.
 
 Scalars are buffered and sent as columns (``send_columns``) at each :meth:`flush`; the
 default blueprint opens the viewer on fields | temperatures and TCs | powers and eta.
@@ -37,6 +39,7 @@ log = logging.getLogger(__name__)
 APP_ID = "furnace-twin"
 TIMELINE = "t"
 TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
+_LEVELS = {"info": rr.TextLogLevel.INFO, "warn": rr.TextLogLevel.WARN, "error": rr.TextLogLevel.ERROR}
 
 
 def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
@@ -59,6 +62,7 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
                 rrb.TimeSeriesView(name="feedforward u_ff (fraction of u_max)", origin="power/u_ff"),
                 rrb.TimeSeriesView(name="inhomogeneity (K)", origin="inhomogeneity"),
                 rrb.TimeSeriesView(name="eta (m)", origin="eta"),
+                rrb.TextLogView(name="events", origin="events"),
             ),
             column_shares=[2, 2, 2],
         ),
@@ -152,6 +156,13 @@ class RecordingSink:
                 self.rec.log(f"field/{name}", rr.DepthImage(
                     np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
                     depth_range=list(self.temperature_range)))
+
+    def log_event(self, t: float, text: str, level: str = "info") -> None:
+        """One event of the run as a text log at run time ``t`` (s); ``level`` info, warn or error."""
+        if self._closed:
+            return
+        self.rec.set_time(TIMELINE, duration=float(t))
+        self.rec.log("events", rr.TextLog(text, level=_LEVELS.get(level, rr.TextLogLevel.INFO)))
 
     def flush(self) -> None:
         """Send the buffered scalars as columns and push them to the file."""

@@ -40,8 +40,13 @@ CREATE TABLE IF NOT EXISTS changes (
 );
 CREATE INDEX IF NOT EXISTS changes_run ON changes(run_id);
 """
+#: columns added after the first release: (name, SQL type); added to an older database when it is opened
+_ADDED_COLUMNS = (("label", "TEXT"),)
+MAX_LABEL_CHARS = 80
 
 ACTIVE_STATUSES = ("queued", "starting", "running")
+#: the columns of a RunRow, in its order (named: an older database has its added columns last, in any order)
+_RUN_COLUMNS = "id, scenario, status, created_at, started_at, ended_at, latest, metrics, error, label"
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,7 @@ class RunRow:
     latest: dict[str, Any] | None
     metrics: dict[str, Any] | None
     error: str | None
+    label: str | None = None
 
 
 @dataclass(frozen=True)
@@ -67,6 +73,21 @@ class ChangeRow:
     status: str
     applied_t: float | None
     message: str | None
+
+
+def clean_label(label: str | None) -> str | None:
+    """A run's label as stored: one line with single spaces, ``None`` if blank; ``ValueError`` if longer than
+    ``MAX_LABEL_CHARS`` or not printable.
+
+    >>> clean_label("  fixed,\tTC4  middle "), clean_label(" ")
+    ('fixed, TC4 middle', None)
+    """
+    text = " ".join((label or "").split())
+    if len(text) > MAX_LABEL_CHARS:
+        raise ValueError(f"at most {MAX_LABEL_CHARS} characters, got {len(text)}")
+    if any(not c.isprintable() for c in text):
+        raise ValueError("only printable characters")
+    return text or None
 
 
 def _loads(text: str | None) -> Any:
@@ -83,6 +104,10 @@ class RunRepository:
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SCHEMA)
+        have = {r[1] for r in self._db.execute("PRAGMA table_info(runs)")}
+        for name, kind in _ADDED_COLUMNS:
+            if name not in have:
+                self._db.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
 
     def close(self) -> None:
         with self._lock:
@@ -123,23 +148,35 @@ class RunRepository:
             ),
         )
 
+    def set_label(self, run_id: str, label: str | None) -> None:
+        """A user's name for the run (``None`` or empty: none)."""
+        self._exec("UPDATE runs SET label=? WHERE id=?", (label or None, run_id))
+
+    def delete_run(self, run_id: str) -> bool:
+        """Remove the run and its changes (a user's delete, retention); ``False`` if there was no such run."""
+        with self._lock:
+            self._db.execute("BEGIN")
+            try:
+                self._db.execute("DELETE FROM changes WHERE run_id=?", (run_id,))
+                gone = self._db.execute("DELETE FROM runs WHERE id=?", (run_id,)).rowcount
+                self._db.execute("COMMIT")
+            except Exception:
+                self._db.execute("ROLLBACK")
+                raise
+        return bool(gone)
+
     def get(self, run_id: str) -> RunRow | None:
-        cur = self._exec("SELECT * FROM runs WHERE id=?", (run_id,))
+        cur = self._exec(f"SELECT {_RUN_COLUMNS} FROM runs WHERE id=?", (run_id,))
         row = cur.fetchone()
         return None if row is None else self._run(row)
 
     def list_runs(self, limit: int = 200) -> list[RunRow]:
-        cur = self._exec("SELECT * FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
+        cur = self._exec(f"SELECT {_RUN_COLUMNS} FROM runs ORDER BY created_at DESC LIMIT ?", (limit,))
         return [self._run(r) for r in cur.fetchall()]
 
     def runs_created_before(self, cutoff: float) -> list[RunRow]:
-        cur = self._exec("SELECT * FROM runs WHERE created_at < ? ORDER BY created_at", (cutoff,))
+        cur = self._exec(f"SELECT {_RUN_COLUMNS} FROM runs WHERE created_at < ? ORDER BY created_at", (cutoff,))
         return [self._run(r) for r in cur.fetchall()]
-
-    def delete_run(self, run_id: str) -> None:
-        """Remove a run and its changes (retention)."""
-        self._exec("DELETE FROM changes WHERE run_id=?", (run_id,))
-        self._exec("DELETE FROM runs WHERE id=?", (run_id,))
 
     def count_active(self) -> int:
         marks = ",".join("?" * len(ACTIVE_STATUSES))
@@ -189,5 +226,5 @@ class RunRepository:
     def _run(r: tuple[Any, ...]) -> RunRow:
         return RunRow(
             id=r[0], scenario=json.loads(r[1]), status=r[2], created_at=r[3], started_at=r[4],
-            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8],
+            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8], label=r[9],
         )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +45,13 @@ class RunFiles:
     @property
     def scenario(self) -> Path:
         return self.folder / SCENARIO
+
+    def remove(self) -> None:
+        """Delete the folder: first out of sight (renamed to ``.deleted-<id>``, atomic), then its files."""
+        trash = self.folder.with_name(f".deleted-{self.folder.name}")
+        if self.folder.is_dir():
+            self.folder.rename(trash)
+        shutil.rmtree(trash, ignore_errors=True)
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:

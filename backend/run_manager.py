@@ -5,16 +5,19 @@ numerics never run on the event loop: the task hands :meth:`RunWorker.advance` t
 run's own single-thread executor, then publishes the latest snapshot as a stream frame
 (at most ``stream_max_hz`` per second) and sleeps until the next sample is due.
 
-The routes and both UIs use only the public methods below (start, stop, change; run, runs,
-changes, status, latest, in_force, scenario, live_runs; files, hub, last_frame;
-call_from_thread for a UI on another thread).  Scenarios and changes are checked against the
-furnace's limits (``twin.limits``) before they reach a run.
+The routes and both UIs use only the public methods below (start / launch, stop, change,
+set_label, delete; run, runs, changes, status, latest, in_force, scenario, live_runs,
+live_series; files, hub, last_frame; call_from_thread for a UI on another
+thread).  Scenarios and changes are checked (``backend.run_checks``: the furnace's limits,
+the reachable range, the reference's feasibility) before they reach a run.  Each run's
+events (``RunWorker.events``) go out once each, in the frames' ``event_log``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import dataclasses
 import logging
 import time
 import uuid
@@ -23,77 +26,38 @@ from collections.abc import Coroutine
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from pydantic import ValidationError
-
 from backend.fanout import StreamHub
-from backend.frames import SnapshotLike, events_of, frame_json
+from backend.frames import SnapshotLike, frame_extra, frame_json
 from backend.loop_factory import DefaultLoopFactory
-from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow
+from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow, clean_label
+from backend.run_checks import RunChecks
 from backend.run_files import RunFiles, write_json_atomic
+from backend.run_types import (  # noqa: F401  (re-exported: the routes and the UIs import them from here)
+    InForce,
+    InsufficientStorage,
+    LimitExceeded,
+    LiveSample,
+    RequestConflict,
+    RunIsActive,
+    RunNotActive,
+    RunNotFound,
+    Started,
+    TooManyRuns,
+    in_force,
+)
 from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
 from backend.settings import Settings
+from backend.start_requests import RequestReused, StartRequests
 from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
-from twin.control.budget import PlanBudget, PlanCancelled
+from twin.control.budget import PlanCancelled
 from twin.limits import ScenarioLimits, scenario_limits
-from twin.scenario import OscillationSpec, Reference, Scenario, check
+from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 ADVANCE_BUDGET_S = 0.05  # wall s of stepping per executor call: bounds frame latency at speed max
-
-
-class RunNotFound(LookupError):
-    pass
-
-
-class RunNotActive(RuntimeError):
-    """The run exists but is no longer running (409)."""
-
-
-class TooManyRuns(RuntimeError):
-    """``max_concurrent_runs`` runs are already going (429)."""
-
-
-class InsufficientStorage(RuntimeError):
-    """The data directory's quota or the disk's free space has no room for the run (507)."""
-
-
-class LimitExceeded(ValueError):
-    """The scenario asks for more than the furnace or the server allows (amplitude, run length, speed) (422)."""
-
-
-@dataclass(frozen=True)
-class LiveSample:
-    """The latest sample of a running run: its snapshot, sequence number and the run's status."""
-
-    snapshot: SnapshotLike
-    seq: int
-    status: str
-
-
-@dataclass(frozen=True)
-class InForce:
-    """The reference and oscillation a run uses now (after live changes), as JSON objects."""
-
-    reference: dict[str, Any]
-    oscillation: dict[str, Any]
-
-
-def in_force(scenario: dict[str, Any], changes: list[ChangeRow]) -> InForce:
-    """The scenario's reference and oscillation, replaced by each applied change in turn (an ended run)."""
-    current = {"reference": scenario.get("reference") or {}, "oscillation": scenario.get("oscillation") or {}}
-    for ch in changes:
-        if ch.status == "applied" and ch.kind in current:
-            current[ch.kind] = ch.body
-    return InForce(**current)
-
-
-def _say(exc: ValidationError) -> str:
-    """A pydantic error as one line that names each field."""
-    return "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
-                     for e in exc.errors())
 
 
 @dataclass(eq=False)
@@ -105,6 +69,7 @@ class ActiveRun:
     status: str = "queued"
     task: asyncio.Task[None] | None = None
     published_seq: int = -1
+    sent_events: int = 0  # events of the worker's list already sent in frames
     started_monotonic: float = field(default_factory=time.monotonic)
 
 
@@ -131,6 +96,8 @@ class RunManager:
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
         self._shutting_down = False
+        self._requests: StartRequests[Started] = StartRequests()  # a repeated POST gets the same run
+        self.checks = RunChecks(cfg, self.limits, settings, self.loop_factory)
         #: the data directory's usage, quota, free space and retention (backend.storage)
         self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
@@ -138,38 +105,24 @@ class RunManager:
         return RunFiles(self.settings.runs_dir / run_id)
 
     # ---- start ----
-    def check_limits(self, scenario: Scenario) -> None:
-        """Raise :class:`LimitExceeded` if the scenario lies outside the furnace's or this server's limits."""
-        try:
-            check(scenario, self.limits)
-        except ValidationError as exc:
-            raise LimitExceeded(_say(exc)) from None
-        s = self.settings
-        problems = []
-        if scenario.duration > s.max_duration_s:
-            problems.append(f"duration: {scenario.duration:g} s exceeds this server's limit of "
-                            f"{s.max_duration_s:g} s")
-        if scenario.speed != "max" and float(scenario.speed) > s.max_speed:
-            problems.append(f"speed: {scenario.speed:g} exceeds this server's limit of {s.max_speed:g}")
-        if problems:
-            raise LimitExceeded("; ".join(problems))
-
     async def start(self, scenario: Scenario) -> str:
-        """Register and launch a run; returns its id."""
-        self.check_limits(scenario)
-        check = getattr(self.loop_factory, "check_reference", None)
-        if callable(check):  # off the event loop: the first call may load the radiation model
-            try:
-                await asyncio.to_thread(check, self.cfg, scenario.reference)
-            except ValueError as exc:
-                raise LimitExceeded(f"reference: {exc}") from None
-        check_plan = getattr(self.loop_factory, "check_plan", None)
-        if callable(check_plan):  # the first plan within this server's time and memory (twin.control.budget)
-            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
-            try:
-                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
-            except ValueError as exc:
-                raise LimitExceeded(f"reference: {exc}") from None
+        """Register and launch a run; returns its id (:meth:`launch` without a request id)."""
+        return (await self.launch(scenario)).run_id
+
+    async def launch(self, scenario: Scenario, request_id: str | None = None) -> Started:
+        """Start a run once per ``request_id``: the same id again (a double click, a retried request) gets the
+        run the first request started, or its refusal, instead of a second run."""
+        if request_id is None:
+            return await self._launch(scenario)
+        try:
+            started, replayed = await self._requests.once(request_id, scenario.to_json(),
+                                                          lambda: self._launch(scenario))
+        except RequestReused as exc:
+            raise RequestConflict(str(exc)) from None
+        return dataclasses.replace(started, replayed=replayed)
+
+    async def _launch(self, scenario: Scenario) -> Started:
+        notes = await self.checks.start(scenario)
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -187,7 +140,7 @@ class RunManager:
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
-                           disk=self.disk)
+                           disk=self.disk, notes=notes)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
@@ -197,19 +150,28 @@ class RunManager:
         self._runs[run_id] = run
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
-        return run_id
+        return Started(run_id, notes)
 
     def _set_status(self, run_id: str, run: ActiveRun, status: str, error: str | None = None) -> None:
         run.status = status
         self._repo.set_status(run_id, status, error=error)
 
-    def _publish(self, run_id: str, run: ActiveRun, events: list[str] | None = None) -> None:
+    def _frame(self, run_id: str, run: ActiveRun, snap: SnapshotLike, seq: int, wall: float, status: str) -> str:
+        """A frame of ``snap`` carrying the run's events that no frame has carried yet (each one once)."""
+        w = run.worker
+        first = run.sent_events
+        new = w.events[first:]
+        run.sent_events = first + len(new)
+        log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(new)]
+        return frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=status,
+                          events=[e.text for e in new], extra={"event_log": log_entries, **frame_extra(snap, w.fillet)})
+
+    def _publish(self, run_id: str, run: ActiveRun) -> None:
         w = run.worker
         if w.latest is None or w.seq == run.published_seq:
             return
         run.published_seq = w.seq
-        run.hub.publish(frame_json(w.latest, run_id=run_id, seq=w.seq, wall_time=w.latest_wall,
-                                   status=run.status, events=events))
+        run.hub.publish(self._frame(run_id, run, w.latest, w.seq, w.latest_wall, run.status))
 
     async def _drive(self, run_id: str, run: ActiveRun) -> None:
         """The run's task: build, step at speed, publish, finalise."""
@@ -220,8 +182,6 @@ class RunManager:
         # skipped even when two of them fall into one advance() call (a late worker catching up)
         every_sample = w.speed is not None and w.speed / self.cfg.sampling.t_s <= self.settings.stream_max_hz
         last_pub = -1e9
-        # events of samples that are not streamed one by one ride on the next frame: none is lost
-        unsent_events: list[str] = []
         final = "finished"
         error: str | None = None
         try:
@@ -233,15 +193,12 @@ class RunManager:
                 now = time.monotonic()
                 if every_sample:  # the samples come slower than the frame cap: send each one
                     for snap, seq, wall in adv.samples:
-                        run.hub.publish(frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=run.status))
+                        run.hub.publish(self._frame(run_id, run, snap, seq, wall, run.status))
                         run.published_seq = seq
-                else:
-                    for snap, _, _ in adv.samples:
-                        unsent_events.extend(events_of(snap.events))
+                # events of samples that are not streamed one by one ride on the next frame: none is lost
                 pending = w.seq != run.published_seq
                 if pending and now - last_pub >= min_interval:
-                    self._publish(run_id, run, unsent_events)
-                    unsent_events = []
+                    self._publish(run_id, run)
                     last_pub, pending = now, False
                 if adv.finished:
                     break
@@ -274,14 +231,13 @@ class RunManager:
             w.stop_requested.set()
             w.cancel_changes(f"the run is {final}")
             try:
-                await asyncio.shield(aio.run_in_executor(run.executor, w.finalize))
+                await asyncio.shield(aio.run_in_executor(run.executor, w.finalize, final, error))
             except Exception:
                 log.exception("run %s: finalising failed", run_id)
             run.status = final
             self._repo.set_status(run_id, final, error=error)
             if w.latest is not None:
-                run.hub.publish(frame_json(w.latest, run_id=run_id, seq=w.seq, wall_time=w.latest_wall,
-                                           status=final, events=unsent_events))
+                run.hub.publish(self._frame(run_id, run, w.latest, w.seq, w.latest_wall, final))
             run.hub.close()
             if run.hub.latest is not None:
                 self._last_frames[run_id] = run.hub.latest
@@ -308,28 +264,51 @@ class RunManager:
     async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
         """Queue a reference / oscillation change; wait (bounded) until it is in force (``applied``), a later
         change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in the
-        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`.
-
-        A change outside the furnace's limits is refused (:class:`ChangeRejected`) before it reaches the run."""
+        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`;
+        one outside the furnace's limits, or a reference the furnace cannot follow, before it reaches the run."""
         run = self._active(run_id)
-        try:
-            check(value, self.limits)
-        except ValidationError as exc:
-            raise ChangeRejected(_say(exc)) from None
+        self.checks.change_limits(value)
         if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
             raise RunNotActive(f"run {run_id} is {run.status}")
+        notes: tuple[str, ...] = ()
+        if kind == "reference":  # from the current estimate: the mean now, from the next sample on
+            w, snap = run.worker, run.worker.latest
+            notes = await self.checks.reference_change(
+                value, w.scenario.duration, w.oscillation,  # type: ignore[arg-type]
+                float(snap.T_mean_hat) if snap is not None else None,
+                float(snap.t) + self.cfg.sampling.t_s if snap is not None else 0.0)
         body = value.model_dump(mode="json")
         change_id = self._repo.add_change(run_id, kind, body)
-        fut = run.worker.submit_change(kind, value, change_id)
+        fut = run.worker.submit_change(kind, value, change_id, notes)
         run.wake.set()
         try:
             result = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)),
                                             timeout=self.settings.change_timeout_s)
         except TimeoutError:
-            return {"id": change_id, "kind": kind, "status": "pending", "body": body}
+            return {"id": change_id, "kind": kind, "status": "pending", "body": body, "warnings": list(notes)}
         except ChangeRejected:
             raise
-        return {"id": change_id, "kind": kind, "body": body, **result}
+        return {"id": change_id, "kind": kind, "body": body, **result, "warnings": list(notes)}
+
+    # ---- the runs list: label and delete ----
+    def set_label(self, run_id: str, label: str | None) -> RunRow:
+        """Name a run (``None`` or blank: no name; ``repository.clean_label``)."""
+        self.run(run_id)
+        try:
+            self._repo.set_label(run_id, clean_label(label))
+        except ValueError as exc:
+            raise LimitExceeded(f"label: {exc}") from None
+        return self.run(run_id)
+
+    def delete(self, run_id: str) -> None:
+        """Remove a run that has ended, with its files (:class:`RunIsActive` while it is going)."""
+        row = self.run(run_id)
+        if run_id in self._runs or row.status in ACTIVE_STATUSES:
+            raise RunIsActive(f"run {run_id} is {self.status(run_id) or row.status}: stop it before deleting it")
+        self.files(run_id).remove()
+        self._repo.delete_run(run_id)
+        self._last_frames.pop(run_id, None)
+        log.info("run %s deleted", run_id)
 
     # ---- what the routes and the UIs read ----
     def run(self, run_id: str) -> RunRow:
@@ -379,6 +358,12 @@ class RunManager:
             w = run.worker
             return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"))
         return in_force(self.run(run_id).scenario, self.changes(run_id))
+
+    def live_series(self, run_id: str) -> dict[str, Any] | None:
+        """The time series of a run this server drives, up to its latest sample (``timeseries.npz`` layout);
+        ``None`` if it drives no such run or it has no sample yet.  Any thread."""
+        run = self._runs.get(run_id)
+        return None if run is None else run.worker.live_series()
 
     def hub(self, run_id: str) -> StreamHub | None:
         run = self._runs.get(run_id)

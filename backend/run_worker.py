@@ -12,6 +12,9 @@ change (``twin.runs.replanning``): the change is ``pending`` until its plan is i
 ``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run ended first).
 Every plan of the run has a budget (``Settings.plan_max_s``, ``plan_max_mb``) and is cancelled by
 the run's stop event, also while the run is starting.
+
+The worker keeps the run's events (``backend.run_events``: the loop's and the server's), each added once
+in the worker thread to its list, the loop's run record (``timeseries.npz``) and the recording.
 """
 
 from __future__ import annotations
@@ -26,17 +29,20 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from backend.frames import SnapshotLike, json_safe, scalar_values
+from backend.frames import SnapshotLike, events_of, json_safe, scalar_values
 from backend.recording import RecordingSink
 from backend.repository import RunRepository
+from backend.run_events import RunEvents, end_event
 from backend.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.settings import Settings
 from backend.storage import DataDir
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
+from twin.physics.fillet import Fillet
+from twin.runs.record import RunEvent, event_arrays
 from twin.runs.replanning import Superseded
 from twin.runs.series_store import SeriesStore, consolidate
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +102,7 @@ class _Change:
     value: Any
     change_id: int
     future: concurrent.futures.Future[dict[str, Any]]
+    notes: tuple[str, ...] = ()  # feasibility warnings, reported as events when the change applies
 
 
 class RunWorker:
@@ -112,6 +119,7 @@ class RunWorker:
         loop_factory: LoopFactory,
         *,
         disk: DataDir | None = None,
+        notes: tuple[str, ...] = (),
     ) -> None:
         self.run_id = run_id
         self.disk = disk
@@ -136,6 +144,31 @@ class RunWorker:
         self._origin_t = 0.0
         self._last_flush = 0.0
         self.series = SeriesStore(files.folder)  # the time series, appended at each flush
+        self._events = RunEvents(tuple(g.name for g in cfg.lamps.groups), cfg.sampling.t_s)
+        self.events = self._events.items  #: the run's events, oldest first (backend.run_events)
+        self._notes = notes
+        self.fillet = Fillet.of(cfg)  # for the frames' spread (backend.frames.frame_extra)
+
+    # ---- events ----
+    def add_event(self, t: float, text: str, level: str = "info", *, in_record: bool = False) -> None:
+        """One report of the run (worker thread): kept for the stream, the run record (``in_record``: the loop
+        put it there already) and the recording."""
+        event = RunEvent(float(t), text, level)
+        self.events.append(event)
+        note = getattr(getattr(self.loop, "record", None), "add_event", None)
+        if not in_record and callable(note):
+            note(event)
+        if self.recording is not None:
+            self.recording.log_event(event.t, event.text, event.level)
+
+    def _add_later(self, t: float | None, text: str, level: str) -> None:
+        """An event from another thread (a change settled by the re-planning thread): added at the next step."""
+        at = t if t is not None else (float(self.latest.t) if self.latest is not None else 0.0)
+        self._events.later(RunEvent(float(at), text, level))
+
+    def _add_queued(self) -> None:
+        for e in self._events.queued():
+            self.add_event(e.t, e.text, e.level)
 
     # ---- set-up (worker thread) ----
     def build(self) -> None:
@@ -149,6 +182,12 @@ class RunWorker:
         self.loop = self._factory(self.cfg, self.scenario, budget=self.budget())
         if self.stop_requested.is_set():  # stopped while the first plan was being made
             raise PlanCancelled("the run was stopped while it was starting")
+        sc = self.scenario
+        speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
+        self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
+                            f"{describe(sc.oscillation)}, {sc.duration:g} s, {speed}")
+        for note in self._notes:
+            self.add_event(0.0, f"feasibility: {note}", "warn")
         self._rebase(0.0)
         self._last_flush = time.monotonic()
 
@@ -162,10 +201,11 @@ class RunWorker:
         self._origin_t = t
 
     # ---- changes (any thread submits, worker applies) ----
-    def submit_change(self, kind: str, value: Any, change_id: int) -> concurrent.futures.Future[dict[str, Any]]:
+    def submit_change(self, kind: str, value: Any, change_id: int,
+                      notes: tuple[str, ...] = ()) -> concurrent.futures.Future[dict[str, Any]]:
         fut: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
         with self._changes_lock:
-            self._changes.append(_Change(kind, value, change_id, fut))
+            self._changes.append(_Change(kind, value, change_id, fut, notes))
         return fut
 
     def _apply_changes(self) -> bool:
@@ -212,20 +252,28 @@ class RunWorker:
             log.info("run %s: %s change %d in force from t=%.1f s (%.2f s after it was handed over)",
                      self.run_id, ch.kind, ch.change_id, t, replan_s)
             self.repo.finish_change(ch.change_id, "applied", t, None)
+            for note in ch.notes:
+                self._add_later(t, f"feasibility: {note}", "warn")
             ch.future.set_result({"status": "applied", "applied_t": t, "replan_s": replan_s})
-        elif isinstance(exc, Superseded):
+            return
+        what = f"{ch.kind} change to {describe(ch.value)}"
+        if isinstance(exc, Superseded):
             self.repo.finish_change(ch.change_id, "superseded", None, str(exc))
+            self._add_later(None, f"{what} superseded: {exc}", "info")
             ch.future.set_result({"status": "superseded", "applied_t": None, "message": str(exc)})
         elif isinstance(exc, PlanCancelled):
             self.repo.finish_change(ch.change_id, "cancelled", None, str(exc))
+            self._add_later(None, f"{what} cancelled: {exc}", "warn")
             ch.future.set_exception(ChangeCancelled(str(exc)))
         elif isinstance(exc, ValueError):  # unreachable, or beyond this server's plan limits
             self.repo.finish_change(ch.change_id, "rejected", t, str(exc))
+            self._add_later(t, f"{what} refused: {exc}", "warn")
             ch.future.set_exception(ChangeRejected(str(exc)))
         else:  # the solve failed: the run goes on with its old plan
             log.warning("run %s: %s change %d failed: %r", self.run_id, ch.kind, ch.change_id, exc)
             message = f"re-planning failed, the run goes on as before: {exc}"
             self.repo.finish_change(ch.change_id, "failed", None, message)
+            self._add_later(t, f"{what}: {message}", "error")
             ch.future.set_exception(ChangeRejected(message))
 
     def cancel_changes(self, reason: str) -> None:
@@ -233,6 +281,7 @@ class RunWorker:
             pending, self._changes = list(self._changes), deque()
         for ch in pending:
             self.repo.finish_change(ch.change_id, "cancelled", None, reason)
+            self._add_later(None, f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
             ch.future.set_exception(ChangeCancelled(reason))
 
     # ---- stepping (worker thread) ----
@@ -250,6 +299,7 @@ class RunWorker:
         samples: list[tuple[SnapshotLike, int, float]] = []
         t_s = self.cfg.sampling.t_s
         wait = 0.0
+        self._add_queued()
         while not self.stop_requested.is_set() and not self._finished():
             if self._apply_changes():
                 self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
@@ -272,6 +322,11 @@ class RunWorker:
             samples.append((snap, self.seq, self.latest_wall))
             if self.recording is not None:
                 self.recording.add(snap)
+            self._add_queued()
+            for text in events_of(snap.events):  # the loop put them into its record with the sample
+                self.add_event(float(snap.t), text, "warn" if "failed" in text else "info", in_record=True)
+            for event in self._events.saturation.update(float(snap.t), snap.u):
+                self.add_event(event.t, event.text, event.level)
             wait = 0.0
             if time.monotonic() - start >= budget_s:
                 break
@@ -289,6 +344,16 @@ class RunWorker:
             return None
         data = dict(self.loop.timeseries())
         data.setdefault("scenario", self.scenario.to_json())
+        if not callable(getattr(getattr(self.loop, "record", None), "add_event", None)):
+            data.update(event_arrays(list(self.events)))  # a loop without a record of its own: the worker's
+        return data
+
+    def live_series(self) -> dict[str, Any] | None:
+        """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush, with the events
+        numbered as the frames number them (this worker's list); any thread."""
+        data = self._timeseries()
+        if data is not None:
+            data.update(event_arrays(list(self.events)))
         return data
 
     def flush(self, metrics: dict[str, Any] | None = None) -> None:
@@ -305,8 +370,13 @@ class RunWorker:
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 
-    def finalize(self) -> dict[str, Any] | None:
-        """Last flush; metrics of the run so far (``None`` entries where a window was not reached)."""
+    def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
+        """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
+        far (``None`` entries where a window was not reached)."""
+        self._add_queued()
+        if status is not None:
+            end = end_event(status, float(self.latest.t) if self.latest is not None else 0.0, error)
+            self.add_event(end.t, end.text, end.level)
         metrics: dict[str, Any] | None = None
         if self.loop is not None and self.latest is not None:
             try:

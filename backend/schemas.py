@@ -32,6 +32,10 @@ class RunCreated(BaseModel):
     id: str
     status: str
     links: RunLinks
+    warnings: list[str] = Field(default_factory=list,
+                                description="what the feasibility check found (the run starts anyway)")
+    replayed: bool = Field(False, description="true when this answers a repeated request id (Idempotency-Key): "
+                                              "the run the first request started")
 
 
 class ChangeOut(BaseModel):
@@ -55,6 +59,7 @@ class ChangeResult(BaseModel):
     applied_t: float | None = None
     replan_s: float | None = Field(None, description="wall time from hand-over to the plan in force (s)")
     message: str | None = None
+    warnings: list[str] = Field(default_factory=list, description="feasibility of a new reference")
 
 
 class RunSummary(BaseModel):
@@ -67,7 +72,14 @@ class RunSummary(BaseModel):
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
     metrics: dict[str, Any] | None = Field(None, description="product.md metrics (calibration, shadow: objects)")
     error: str | None = None
+    label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
     links: RunLinks
+
+
+class LabelIn(BaseModel):
+    """``PATCH /api/runs/{id}``: the run's name (null or empty: none)."""
+
+    label: str | None = Field(None, description="at most 80 characters")
 
 
 class RunDetail(RunSummary):
@@ -76,6 +88,8 @@ class RunDetail(RunSummary):
     oscillation: dict[str, Any] = Field(description="the oscillation in force now, likewise")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
+    windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "
+                                                             "[a, b], steady: [a, b]}, from the last reference change")
 
 
 class StopResult(BaseModel):
@@ -109,3 +123,39 @@ class FurnaceOut(BaseModel):
     limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
                                                "{min, max, exclusive_min, unit, default}")
     defaults: dict[str, Any] = Field(description="the scenario a POST with an empty body starts")
+
+
+class StudyLinks(BaseModel):
+    self: str
+    stop: str
+    resume: str
+    files: str = Field(description="prefix of the study's files: results.parquet, results.csv, study.md, "
+                                   "summary.json, figures/<name>.png")
+
+
+class StudySummary(BaseModel):
+    id: str
+    name: str | None = None
+    furnace: str
+    status: str = Field(description="queued, running, finished, stopped, interrupted or error")
+    created_at: float = Field(description="unix s")
+    started_at: float | None = None
+    ended_at: float | None = None
+    total: int = Field(description="cases of the study")
+    finished: int = Field(description="cases done or failed, including those found done earlier")
+    failed: int
+    skipped: int = Field(description="cases found done by an earlier invocation (resume)")
+    workers: int = Field(description="Dask workers of the current or last invocation")
+    error: str | None = None
+    links: StudyLinks
+
+
+class StudyDetail(StudySummary):
+    study: dict[str, Any] = Field(description="the study document as posted")
+    cases: list[dict[str, Any]] | None = Field(
+        None, description="per case: key, index, params, status, metrics, error (when the study has ended)")
+    best: list[dict[str, Any]] = Field(default_factory=list, description="best case (or grid point) per metric")
+    percentiles: dict[str, dict[str, float]] | None = Field(None, description="Monte Carlo: per metric")
+    timing: dict[str, Any] | None = None
+    figures: list[str] = Field(default_factory=list, description="URLs of the PNG figures")
+    downloads: dict[str, str] = Field(default_factory=dict, description="file name -> URL")

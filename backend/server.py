@@ -65,5 +65,7 @@ def _warm_up(factory: DefaultLoopFactory, cfg: FurnaceConfig) -> None:
     try:
         factory.radiation(cfg)
         log.info("radiation model ready")
+        factory.truth_radiation(cfg)
+        log.info("the simulated furnace's own radiation table ready")
     except Exception:
         log.exception("loading the radiation model failed; runs will retry")

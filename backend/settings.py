@@ -64,6 +64,11 @@ class Settings(BaseSettings):
     flush_interval_s: float = Field(2.0, gt=0, description="timeseries / database / recording flush (wall s)")
     recording_image_interval_s: float = Field(0.5, gt=0, description="simulated s between field images in the .rrd")
     change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")
+    study_workers: int | None = Field(None, ge=1, le=256,
+                                      description="LocalCluster process workers of a study (default: one per core)")
+    study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "
+                                        "e.g. tcp://127.0.0.1:8786")
+    max_study_cases: int = Field(5000, ge=1, le=100_000, description="largest study accepted (cases)")
 
     @field_validator("api_token")
     @classmethod
@@ -86,3 +91,7 @@ class Settings(BaseSettings):
     @property
     def runs_dir(self) -> Path:
         return self.data_dir / "runs"
+
+    @property
+    def studies_dir(self) -> Path:
+        return self.data_dir / "studies"

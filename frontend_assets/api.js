@@ -11,7 +11,8 @@ export function setToken(value) {
 
 export function forgetOldToken() { localStorage.removeItem(TOKEN_KEY); } // an older dashboard kept it there
 
-// One validation error of FastAPI / pydantic as a sentence: "reference › point 2 › temperature: ..."
+// One validation error as a sentence: "reference › point 2 › temperature: must be a number, got 'x'"
+// (the server words the messages plainly, backend/messages.py; this names the field)
 function formatValidation(e) {
   const loc = e.loc || [];
   const parts = [];
@@ -36,27 +37,28 @@ function formatDetail(detail) {
   return JSON.stringify(detail);
 }
 
-export async function api(method, path, body) {
-  const headers = { "Content-Type": "application/json" };
+export async function api(method, path, body, extraHeaders = {}) {
+  const headers = { "Content-Type": "application/json", ...extraHeaders };
   if (token()) headers["X-API-Token"] = token(); // reads need it too when the server listens beyond loopback
   let r;
   try {
     r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
   } catch (e) { throw new Error(`the server did not answer (${e.message})`); }
   let data = null;
-  try { data = await r.json(); } catch (e) { data = null; }
+  if (r.status !== 204) { try { data = await r.json(); } catch (e) { data = null; } }
   if (!r.ok) {
     const detail = data && data.detail !== undefined ? formatDetail(data.detail) : r.statusText;
-    let text = `${r.status}: ${detail}`;
+    let text = detail;
     if (r.status === 401) {
       $("token-box").hidden = false;
       $("token").classList.add("need");
-      text = token() ? "401: the API token is wrong: correct it in the \u201cAPI token\u201d field at the top right"
-        : "401: this server needs its API token: enter it in the \u201cAPI token\u201d field at the top right";
+      text = token() ? "the API token is wrong: correct it in the \u201cAPI token\u201d field at the top right"
+        : "this server needs its API token: enter it in the \u201cAPI token\u201d field at the top right";
     }
     const err = new Error(text);
     err.status = r.status;
     throw err;
   }
+  if (data && typeof data === "object" && !Array.isArray(data)) Object.defineProperty(data, "httpStatus", { value: r.status });
   return data;
 }

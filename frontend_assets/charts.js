@@ -1,56 +1,32 @@
-// The plotly.js charts (window.Plotly, served from /assets/plotly.min.js): heat map, mean vs
-// reference, TC errors, group powers, inhomogeneity, eta.  Redrawn at most every RENDER_MS.
-import { fmt } from "./page.js";
-import { emptySeries } from "./series.js";
+// The shown run's charts (plotly.js from /assets/plotly.min.js): a registry of figure functions, one per
+// chart element, redrawn together at most every RENDER_MS.  A new chart: a card in #plots (panels.js) and
+// registerFigure(id, () => ({data, layout})).
+import { heatmapFigure } from "./heatmap.js";
+import { GROUP_COLORS, LANE, LANE0, saturationShapes, windowShapes } from "./overlays.js";
+import { emptySeries, saturationSpans } from "./series.js";
 import { state } from "./state.js";
 
-const GROUP_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"];
 const TC_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"];
 const RENDER_MS = 250; // charts redraw at most 4 times per second; frames arrive up to 20/s
-const CONFIG = { displaylogo: false, responsive: true, modeBarButtonsToRemove: ["lasso2d", "select2d"] };
-const TURBO = [[0, "#30123b"], [0.1, "#4145ab"], [0.2, "#4675ed"], [0.3, "#39a2fc"], [0.4, "#1bcfd4"],
-  [0.5, "#24eca6"], [0.6, "#61fc6c"], [0.7, "#a4fc3b"], [0.8, "#d1e834"], [0.9, "#f3c63a"], [1, "#7a0403"]];
+// no logo, no "Share chart" (plotly.js would upload the chart to its cloud), no lasso / box select
+export const CONFIG = { displaylogo: false, responsive: true, showSendToCloud: false, showEditInChartStudio: false,
+  showLink: false, modeBarButtonsToRemove: ["sendChartToCloud", "editInChartStudio", "lasso2d", "select2d"] };
 
 let revision = 0; // plotly redraws arrays that grew in place only when datarevision changes
-const baseLayout = (title, ytitle, extra = {}) => Object.assign({
+export const baseLayout = (ytitle, extra = {}) => Object.assign({
   datarevision: revision,
-  title: { text: title, font: { size: 13 }, x: 0.02, xanchor: "left", y: 0.97 },
-  margin: { l: 56, r: 12, t: 28, b: 36 },
-  xaxis: { title: { text: "t (s)", standoff: 4 }, zeroline: false },
+  margin: { l: 54, r: 10, t: 6, b: 34 },
+  xaxis: { title: { text: "t (s)", standoff: 2 }, zeroline: false },
   yaxis: { title: { text: ytitle, standoff: 4 }, zeroline: false },
-  legend: { orientation: "h", x: 0, y: -0.22, font: { size: 10 } },
+  legend: { orientation: "h", x: 0, y: -0.2, font: { size: 10 } },
   paper_bgcolor: "#fff", plot_bgcolor: "#fafbfc", font: { size: 11, color: "#1d2330" },
 }, extra);
 
-function heatmapFigure() {
-  const fu = state.furnace;
-  const s = state.series;
-  const [x0, x1, y0, y1] = fu.fillet;
-  const tcRel = fu.tc_relative.slice(0, 3).concat([state.tc4]);
-  const tcx = tcRel.map((p) => p[0] * fu.L_s), tcy = tcRel.map((p) => p[1] * fu.W_s);
-  const z = s && s.field ? s.field : null;
-  const f = state.lastFrame;
-  const sub = f ? `t = ${fmt(f.t)} s · mean ${fmt(f.T_mean_hat)} K · ref ${fmt(f.T_ref)} K` : "";
-  return {
-    data: [
-      { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best",
-        colorbar: { title: { text: "T (K)", side: "right" }, thickness: 12, len: 0.95 },
-        hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>%{z:.1f} K<extra></extra>" },
-      { type: "scatter", mode: "markers+text", x: tcx, y: tcy, text: ["TC1", "TC2", "TC3", "TC4"],
-        textposition: "top center", textfont: { color: "#fff", size: 11 }, hoverinfo: "text",
-        marker: { symbol: ["circle", "circle", "circle", "diamond"], size: 9, color: ["#fff", "#fff", "#fff", "#ff4fc8"],
-          line: { color: "#000", width: 1.5 } }, showlegend: false },
-    ],
-    layout: baseLayout(`Estimated field <span style="font-size:11px;color:#56627a">${sub}</span>`, "y (m)", {
-      xaxis: { title: { text: "x (m), along the specimen length", standoff: 4 }, range: [0, fu.L_s], constrain: "domain" },
-      yaxis: { title: { text: "y (m)", standoff: 4 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
-      margin: { l: 56, r: 12, t: 28, b: 38 },
-      shapes: [{ type: "rect", x0, x1, y0, y1, line: { color: "#fff", width: 2, dash: "dash" } }],
-      annotations: [{ x: x0, y: y0, xanchor: "left", yanchor: "bottom", xshift: 3, yshift: 2, text: "fillet",
-        showarrow: false, font: { color: "#fff", size: 10 } }],
-    }),
-  };
-}
+const FIGURES = new Map();
+export function registerFigure(id, figure) { FIGURES.set(id, figure); }
+
+const windows = () => (state.run && state.run.windows) || (state.series && state.series.windows) || null;
+const tMax = (s) => (s.t.length ? s.t[s.t.length - 1] : 0);
 
 // The user's reference points of the shown run (start and applied live changes) in run time.
 function referenceMarkers(run) {
@@ -62,54 +38,83 @@ function referenceMarkers(run) {
   return { x, y };
 }
 
-function lineFigures() {
-  const s = state.series || emptySeries();
-  const groups = state.furnace.groups.map((g) => g.name);
+function meanFigure(s) {
   const pts = referenceMarkers(state.run);
+  const w = windowShapes(windows(), tMax(s));
   return {
-    "mean-plot": {
-      data: [
-        { x: s.t, y: s.T_ref, name: "T_ref", line: { color: "#111", dash: "dash", width: 1.6 } },
-        { x: s.t, y: s.T_mean_hat, name: "fillet mean (est.)", line: { color: "#d62728", width: 1.8 } },
-        { x: pts.x, y: pts.y, name: "ref. points", mode: "markers", showlegend: pts.x.length > 0,
-          marker: { symbol: "circle-open", size: 8, color: "#111", line: { width: 1.6 } },
-          hovertemplate: "%{x:.1f} s, %{y:.0f} K<extra>reference point</extra>" },
-      ],
-      layout: baseLayout("Fillet mean vs reference", "T (K)"),
-    },
-    "tc-plot": {
-      data: s.tcErr.map((e, i) => ({ x: s.t, y: e, name: i < 3 ? `TC${i + 1}` : "TC4 (validation)",
-        line: { color: TC_COLORS[i], width: i < 3 ? 1.2 : 2 } })),
-      layout: baseLayout("TC reading − estimate", "error (K)"),
-    },
-    "power-plot": {
-      data: groups.flatMap((g, j) => [
-        { x: s.t, y: s.u[j], name: `${g} u`, legendgroup: g, line: { color: GROUP_COLORS[j], width: 1.6 } },
-        { x: s.t, y: s.u_ff[j], name: `${g} u_ff`, legendgroup: g, showlegend: false,
-          line: { color: GROUP_COLORS[j], width: 1, dash: "dot" } },
-      ]),
-      layout: baseLayout("Group powers u (solid) and feedforward u_ff (dotted)", "u / u_max (–)",
-        { yaxis: { title: { text: "u / u_max (–)", standoff: 4 }, range: [-0.02, 1.05] },
-          legend: { orientation: "v", x: 1.01, y: 1, font: { size: 10 } }, margin: { l: 56, r: 90, t: 28, b: 36 } }),
-    },
-    "inh-plot": {
-      data: [{ x: s.inh_t, y: s.inh, name: "T_sup", line: { color: "#805ad5", width: 1.6 } }],
-      layout: baseLayout("Inhomogeneity max |T̂ − T_ref| on the fillet", "T_sup (K)", { showlegend: false }),
-    },
-    "eta-plot": {
-      data: [{ x: s.t, y: s.eta.map((v) => v * 1000), name: "eta", line: { color: "#2c7a7b", width: 1.4 } }],
-      layout: baseLayout("Specimen position η", "η (mm)", { showlegend: false }),
-    },
+    data: [
+      { x: s.t, y: s.T_ref, name: "reference T_ref", line: { color: "#111", dash: "dash", width: 1.6 } },
+      { x: s.t, y: s.T_mean_hat, name: "fillet mean (estimate)", line: { color: "#d62728", width: 1.8 } },
+      { x: pts.x, y: pts.y, name: "reference points", mode: "markers", showlegend: pts.x.length > 0,
+        marker: { symbol: "circle-open", size: 8, color: "#111", line: { width: 1.6 } },
+        hovertemplate: "%{x:.1f} s, %{y:.0f} K<extra>reference point</extra>" },
+    ],
+    layout: baseLayout("T (K)", { shapes: w.shapes, annotations: w.annotations }),
   };
 }
 
+function powerFigure(s) {
+  const groups = state.furnace.groups.map((g) => g.name);
+  const words = (state.glossary && state.glossary.groups) || {};
+  const lanes = saturationShapes(saturationSpans(s));
+  return {
+    data: [
+      ...groups.flatMap((g, j) => [
+        { x: s.t, y: s.u[j], name: g, legendgroup: g, line: { color: GROUP_COLORS[j], width: 1.5 },
+          hovertemplate: `%{y:.2f} at %{x:.1f} s<extra>${words[g] || g}</extra>` },
+        { x: s.t, y: s.u_ff[j], name: `${g} u_ff`, legendgroup: g, showlegend: false,
+          line: { color: GROUP_COLORS[j], width: 1, dash: "dot" }, hovertemplate: `u_ff %{y:.2f}<extra>${g}</extra>` },
+      ]),
+      { x: s.t, y: s.eta.map((v) => v * 1000), name: "η", yaxis: "y2", line: { color: "#2c7a7b", width: 1.2 },
+        showlegend: false, hovertemplate: "η %{y:.1f} mm at %{x:.1f} s<extra></extra>" },
+    ],
+    layout: baseLayout("u / u_max", {
+      yaxis: { title: { text: "u / u_max", standoff: 4 }, domain: [0.3, 1], range: [-0.03, LANE0 + 6 * LANE], zeroline: false,
+        tickvals: [0, 0.25, 0.5, 0.75, 1] },
+      yaxis2: { title: { text: "η (mm)", standoff: 4 }, domain: [0, 0.2], zeroline: false },
+      xaxis: { title: { text: "t (s)", standoff: 2 }, zeroline: false, anchor: "y2" },
+      legend: { orientation: "v", x: 1.01, y: 1, font: { size: 10 } }, margin: { l: 54, r: 58, t: 6, b: 34 },
+      shapes: lanes, // the saturation lanes above u = 1 (their help mark: "saturation")
+    }),
+  };
+}
+
+function tcFigure(s) {
+  const w = windowShapes(windows(), tMax(s));
+  return {
+    data: s.tcErr.map((e, i) => ({ x: s.t, y: e, name: i < 3 ? `TC${i + 1}` : "TC4 (validation)",
+      line: { color: TC_COLORS[i], width: i < 3 ? 1.1 : 2 } })),
+    layout: baseLayout("reading − estimate (K)", { shapes: w.shapes, annotations: w.annotations }),
+  };
+}
+
+function inhFigure(s) {
+  const w = windowShapes(windows(), tMax(s));
+  return {
+    data: [
+      { x: s.inh_t, y: s.inh, name: "T_sup = max |T̂ − T_ref| (paper, metrics)", line: { color: "#805ad5", width: 1.6 } },
+      { x: s.inh_t, y: s.spread, name: "spread = max |T̂ − fillet mean|", line: { color: "#2c7a7b", width: 1.3 } },
+    ],
+    layout: baseLayout("K", { shapes: w.shapes, annotations: w.annotations }),
+  };
+}
+
+registerFigure("heatmap", heatmapFigure);
+registerFigure("mean-plot", () => meanFigure(state.series || emptySeries()));
+registerFigure("power-plot", () => powerFigure(state.series || emptySeries()));
+registerFigure("tc-plot", () => tcFigure(state.series || emptySeries()));
+registerFigure("inh-plot", () => inhFigure(state.series || emptySeries()));
+
 export function render() {
-  if (!state.furnace) return;
+  if (!state.furnace || state.view !== "live") return;
   revision += 1;
-  const hm = heatmapFigure();
-  window.Plotly.react("heatmap", hm.data, hm.layout, CONFIG);
-  const figs = lineFigures();
-  for (const [id, fig] of Object.entries(figs)) window.Plotly.react(id, fig.data, fig.layout, CONFIG);
+  for (const [id, figure] of FIGURES) {
+    const el = document.getElementById(id);
+    if (!el) continue;
+    const fig = figure();
+    fig.layout.datarevision = revision;
+    window.Plotly.react(el, fig.data, fig.layout, CONFIG);
+  }
   state.dirty = false;
 }
 

@@ -1,40 +1,49 @@
-// The event log of the picked run: what the run reports (changes applied, re-plans, its end).
+// The event log of the shown run: what the run reports (start, live changes, re-plans, saturated groups,
+// feasibility warnings, its end), each event once, newest at top.  Events come numbered (n) from the
+// run's history (GET .../series) and from the stream's frames (event_log), so every tab shows the same list.
 import { $, fmt, LIVE, showMsg } from "./page.js";
 import { state } from "./state.js";
 
-const MAX_EVENTS = 200; // entries kept (newest at top)
+const SHOWN = 300; // newest events listed
 
 export function clearEvents() {
-  $("event-log").innerHTML = '<li class="empty muted">events of the shown run appear here</li>';
-  state.nEvents = 0;
-  $("event-count").textContent = "";
+  state.events = new Map();
+  render();
 }
 
-export function addEvent(t, text, kind = "") {
+// events: [{n, t, text, level}]; unknown numbers are added, known ones ignored.
+export function addEvents(events) {
+  let added = false;
+  for (const e of events || []) {
+    if (e && e.n !== undefined && !state.events.has(e.n)) { state.events.set(e.n, e); added = true; }
+  }
+  if (added) render();
+}
+
+function render() {
   const log = $("event-log");
-  const empty = log.querySelector("li.empty");
-  if (empty) empty.remove();
-  const li = document.createElement("li");
-  if (kind) li.className = kind;
-  const ts = document.createElement("span");
-  ts.className = "t";
-  ts.textContent = t === null || t === undefined ? "" : `t = ${fmt(t)} s`;
-  li.append(ts, document.createTextNode(` ${text}`));
-  log.prepend(li); // newest at top
-  while (log.children.length > MAX_EVENTS) log.lastElementChild.remove();
-  state.nEvents += 1;
-  $("event-count").textContent = `· ${state.nEvents}`;
+  const all = [...state.events.values()].sort((a, b) => b.n - a.n);
+  $("event-count").textContent = all.length ? `· ${all.length}` : "";
+  if (!all.length) {
+    log.innerHTML = '<li class="empty muted">events of the shown run appear here</li>';
+    return;
+  }
+  log.replaceChildren(...all.slice(0, SHOWN).map((e) => {
+    const li = document.createElement("li");
+    if (e.level && e.level !== "info") li.className = e.level;
+    const ts = document.createElement("span");
+    ts.className = "t";
+    ts.textContent = `t = ${fmt(e.t)} s`;
+    li.append(ts, document.createTextNode(` ${e.text}`));
+    return li;
+  }));
 }
 
-// A status change of the picked run goes to the event log once; the end of a run completes Stop's message.
+// A status change of the shown run completes Stop's message line once; an error goes there too.
 export function noteStatus(status, t) {
   if (!status || status === state.lastStatus) return;
-  const first = state.lastStatus === null;
   state.lastStatus = status;
-  if (first && !LIVE.includes(status)) return;
   const run = state.run;
-  const kind = status === "error" ? "err" : (status === "interrupted" ? "warn" : "");
-  addEvent(t, `run ${status}${status === "error" && run && run.error ? `: ${run.error}` : ""}`, kind);
   if (state.stopping === state.runId && !LIVE.includes(status)) { // the Stop reply, completed
     showMsg(`run ${state.runId} ${status}${t !== null && t !== undefined ? ` at t = ${fmt(t)} s` : ""}; its data is kept`);
     state.stopping = null;

@@ -1,11 +1,15 @@
-// What the user does: start a run (the form), change the picked run live, stop it, enter the token.
+// What the user does: start a run (the form), change the shown run live, stop it, enter the token.
 import { api, setToken } from "./api.js";
-import { setLiveOscillation } from "./inputs.js";
+import { checkSoon, showFeasibility } from "./feasibility.js";
+import { restoreForm, saveForm } from "./formstore.js";
+import { readNumber, readSpeed, setLiveOscillation } from "./inputs.js";
 import { $, describeReference, fmt, LIVE, showMsg } from "./page.js";
 import { parsePoints } from "./points.js";
-import { refreshHistory, refreshRun, selectRun } from "./runs.js";
+import { refreshRun, selectRun } from "./run.js";
+import { refreshRuns } from "./runlist.js";
 import { state } from "./state.js";
 
+const REPEAT_MS = 3000; // the same form sent again within this time after the last answer is the same start
 const pointLimits = () => state.furnace.limits.reference.points;
 const camel = (s) => s.replace(/-([a-z])/g, (_, c) => c.toUpperCase());
 
@@ -19,40 +23,58 @@ function showRefMode(name) {
   for (const el of document.querySelectorAll(`[data-${name}]`)) el.hidden = el.dataset[camel(name)] !== mode;
 }
 
-function scenarioFromForm(form) {
-  const v = (name) => form.elements[name].value;
-  const num = (name) => Number(v(name));
-  const speedText = v("speed").trim();
-  const reference = refMode("refmode") === "points" ? { points: parsePoints(v("points"), pointLimits()) }
-    : { setpoint: num("setpoint"), t_E: num("t_E") };
+export function scenarioFromForm(form = $("start-form")) {
+  const el = (name) => form.elements[name];
+  const n = (name) => readNumber(el(name));
+  const reference = refMode("refmode") === "points" ? { points: parsePoints(el("points").value, pointLimits()) }
+    : { setpoint: n("setpoint"), t_E: n("t_E") };
   return {
     reference,
-    duration: num("duration"),
-    oscillation: { enabled: form.elements.osc.checked, amplitude: num("amplitude"), period: num("period") },
-    tc4: [num("tc4x"), num("tc4y")],
-    speed: speedText === "max" ? "max" : Number(speedText),
-    mismatch: { emissivity: num("m_eps"), alpha: num("m_alpha"), lamp_efficiency: num("m_lamp") },
-    tc_noise: num("tc_noise"),
-    seed: Math.trunc(num("seed")),
+    duration: n("duration"),
+    oscillation: { enabled: el("osc").checked, amplitude: n("amplitude"), period: n("period") },
+    tc4: [n("tc4x"), n("tc4y")],
+    speed: readSpeed(el("speed")),
+    mismatch: { emissivity: n("m_eps"), alpha: n("m_alpha"), lamp_efficiency: n("m_lamp") },
+    tc_noise: n("tc_noise"),
+    seed: Math.trunc(n("seed")),
+    truth: el("truth").value,
   };
+}
+
+// A start's request id: the same form sent again right after (a double click) keeps it, so the server
+// answers with the run it already started (Idempotency-Key) instead of starting a second one.
+let lastStart = null; // {id, body, at}
+const newId = () => (crypto.randomUUID ? crypto.randomUUID() : `${Date.now()}-${Math.random().toString(16).slice(2)}`);
+
+function requestId(body) {
+  if (lastStart && lastStart.body === body && Date.now() - lastStart.at < REPEAT_MS) return lastStart.id;
+  lastStart = { id: newId(), body, at: Date.now() };
+  return lastStart.id;
 }
 
 async function startRun(ev) {
   ev.preventDefault();
   const btn = $("start-btn");
+  if (btn.disabled) return; // one start at a time: the button stays disabled until the reply
   const area = ev.target.elements.points;
   btn.disabled = true;
   area.classList.remove("invalid");
   let scenario = null;
   try {
     scenario = scenarioFromForm(ev.target);
+    const body = JSON.stringify(scenario);
     showMsg("starting…", false, "start-msg");
-    const created = await api("POST", "/api/runs", scenario);
-    showMsg(`run ${created.id} started: reference ${describeReference(scenario.reference)}`, false, "start-msg");
-    await selectRun(created.id);
-    refreshHistory();
+    const created = await api("POST", "/api/runs", scenario, { "Idempotency-Key": requestId(body) });
+    if (lastStart) lastStart.at = Date.now();
+    const again = created.replayed ? " (already started: the same request came twice)" : "";
+    const warn = created.warnings && created.warnings.length ? ` · warning: ${created.warnings[0]}` : "";
+    showMsg(`run ${created.id} started${again}: reference ${describeReference(scenario.reference)}${warn}`,
+      warn ? "warn" : false, "start-msg");
+    btn.disabled = false; // the reply is in: a click from now on is a new request (or the same, if repeated)
+    if (state.runId !== created.id) selectRun(created.id);
+    refreshRuns();
   } catch (e) {
-    if (!scenario || /reference/.test(e.message)) area.classList.toggle("invalid", refMode("refmode") === "points");
+    if (!scenario && refMode("refmode") === "points" && /points/.test(e.message)) area.classList.add("invalid");
     showMsg(e.message, true, "start-msg");
   }
   btn.disabled = false;
@@ -64,8 +86,8 @@ async function changeReference() {
   area.classList.remove("invalid");
   try {
     body = refMode("live-refmode") === "points" ? { points: parsePoints(area.value, pointLimits()) }
-      : { setpoint: Number($("new-setpoint").value), t_E: Number($("new-tE").value) };
-  } catch (e) { area.classList.add("invalid"); showMsg(e.message, true); return; }
+      : { setpoint: readNumber($("new-setpoint")), t_E: readNumber($("new-tE")) };
+  } catch (e) { if (refMode("live-refmode") === "points") area.classList.add("invalid"); showMsg(e.message, true); return; }
   const what = body.points ? `reference ${describeReference(body)} (times from now)` : `reference ${body.setpoint} K over ${body.t_E} s`;
   const btn = $("ref-btn");
   btn.disabled = true;
@@ -73,7 +95,9 @@ async function changeReference() {
   try {
     const r = await api("PUT", `/api/runs/${state.runId}/reference`, body);
     const at = r.applied_t !== null && r.applied_t !== undefined ? ` at t = ${fmt(r.applied_t)} s` : "";
-    showMsg(r.status === "pending" ? `${what}: still re-planning; it applies when ready` : `${what}: ${r.status}${at}`);
+    const warn = r.warnings && r.warnings.length ? ` · warning: ${r.warnings[0]}` : "";
+    showMsg(r.status === "pending" ? `${what}: still re-planning; it applies when ready${warn}` : `${what}: ${r.status}${at}${warn}`,
+      warn ? "warn" : false);
     refreshRun();
   } catch (e) {
     if (body.points && e.status === 422) area.classList.add("invalid");
@@ -85,8 +109,10 @@ async function changeReference() {
 // On or off, the opposite of what the server says the run does now, with the live amplitude and period.
 async function toggleOscillation() {
   const now = state.run && state.run.oscillation;
-  const body = { enabled: !(now && now.enabled), amplitude: Number($("live-amplitude").value),
-    period: Number($("live-period").value) };
+  let body;
+  try {
+    body = { enabled: !(now && now.enabled), amplitude: readNumber($("live-amplitude")), period: readNumber($("live-period")) };
+  } catch (e) { showMsg(e.message, true); return; }
   showMsg("switching oscillation…");
   try {
     const r = await api("PUT", `/api/runs/${state.runId}/oscillation`, body);
@@ -103,11 +129,16 @@ async function stopRun() {
   try {
     await api("POST", `/api/runs/${runId}/stop`); // the end of the run completes the message (noteStatus)
   } catch (e) { state.stopping = null; showMsg(e.message, true); }
-  setTimeout(() => { refreshRun(); refreshHistory(); }, 800);
+  setTimeout(() => { refreshRun(); refreshRuns(); }, 800);
 }
 
 export function wireForms() {
-  $("start-form").addEventListener("submit", startRun);
+  const form = $("start-form");
+  restoreForm(form);
+  form.addEventListener("submit", startRun);
+  const edited = () => { saveForm(form); checkSoon(() => scenarioFromForm(form)); };
+  form.addEventListener("input", edited);
+  form.addEventListener("change", edited);
   $("ref-btn").addEventListener("click", changeReference);
   $("osc-btn").addEventListener("click", toggleOscillation);
   $("stop-btn").addEventListener("click", stopRun);
@@ -119,4 +150,6 @@ export function wireForms() {
     for (const el of document.querySelectorAll(`input[name="${name}"]`)) el.addEventListener("change", () => showRefMode(name));
     showRefMode(name);
   }
+  showFeasibility(null);
+  checkSoon(() => scenarioFromForm(form));
 }

@@ -1,44 +1,61 @@
-// furnace-twin dashboard: the entry module.  Reads the server and its furnace, builds the inputs from
-// the furnace's limits, then follows the newest running run.  No build step, no CDN: ES modules from /assets/.
+// furnace-twin dashboard: the entry module.  Reads the server, its furnace and its words, builds the inputs
+// from the furnace's limits, then shows the newest running run.  No build step, no CDN: ES modules from /assets/.
 import { api, forgetOldToken, token } from "./api.js";
 import { render, startRendering } from "./charts.js";
+import { refreshComparison, startComparing } from "./compare.js";
 import { wireForms } from "./forms.js";
+import { wireHelp } from "./glossary.js";
+import { wireHeatScale } from "./heatmap.js";
 import { applyLimits } from "./inputs.js";
 import { $, LIVE } from "./page.js";
-import { refreshHistory, refreshRun, selectRun, wireHistory } from "./runs.js";
+import { refreshRun, selectRun } from "./run.js";
+import { refreshRuns, wireRunList } from "./runlist.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
+import { initStudies } from "./studies.js";
 
 window.state = state; // the page's state, for the browser console and the browser tests
 
+export function showView(name) {
+  state.view = name;
+  for (const el of document.querySelectorAll(".view")) el.hidden = el.dataset.view !== name;
+  for (const el of document.querySelectorAll(".tab")) el.classList.toggle("active", el.dataset.view === name);
+  if (name === "live") { state.dirty = true; render(); } else refreshComparison();
+  window.dispatchEvent(new Event("resize")); // charts that were hidden take their size
+}
+
+const serverLine = () => { $("server-state").textContent = `server ok · ${state.health.active_runs} running`; };
+
 async function init() {
   forgetOldToken();
-  wireForms();
-  wireHistory();
   try {
-    [state.health, state.furnace] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace")]);
+    [state.health, state.furnace, state.glossary] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace"),
+      api("GET", "/api/glossary")]);
     applyLimits(state.furnace);
-    $("server-state").textContent = `server ok · ${state.health.active_runs} running`;
+    serverLine();
   } catch (e) {
     $("server-state").textContent = `server unreachable: ${e.message}`;
     return;
   }
+  wireHelp();
+  wireForms();
+  initStudies();
+  wireHeatScale(() => { state.dirty = true; });
+  wireRunList((id) => { selectRun(id); showView("live"); }, refreshComparison);
+  for (const el of document.querySelectorAll(".tab")) el.addEventListener("click", () => showView(el.dataset.view));
   if (state.health.auth_required) { $("token-box").hidden = false; $("token").value = token(); }
   if (state.health.viser_url) { const a = $("viser-link"); a.href = state.health.viser_url; a.hidden = false; }
   state.series = emptySeries();
   render();
   startRendering();
-  await refreshHistory();
-  const runs = await api("GET", "/api/runs?limit=20");
-  const live = runs.find((r) => LIVE.includes(r.status));
-  if (live) selectRun(live.id);
-  setInterval(refreshHistory, 4000);
+  startComparing();
+  await refreshRuns();
+  const first = state.runs.find((r) => LIVE.includes(r.status)) || state.runs[0]; // the newest running, else newest
+  if (first) await selectRun(first.id);
+  setInterval(refreshRuns, 4000);
   setInterval(async () => {
     refreshRun();
-    try {
-      state.health = await api("GET", "/api/health");
-      $("server-state").textContent = `server ok · ${state.health.active_runs} running`;
-    } catch (e) { $("server-state").textContent = "server unreachable"; }
+    try { state.health = await api("GET", "/api/health"); serverLine(); } catch (e) { $("server-state").textContent = "server unreachable"; }
   }, 2000);
 }
 

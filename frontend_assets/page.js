@@ -1,16 +1,21 @@
-// The page's shared pieces: element lookup, number formats, the message lines, the run badge.
+// The page's shared pieces: element lookup, number formats, HTML escaping, the message lines, the run badge,
+// references and oscillations in words.
 
 export const LIVE = ["queued", "starting", "running"]; // statuses of a run that is still going
 
 export const $ = (id) => document.getElementById(id);
-export const pct = (v, d = 2) => (v === null || v === undefined || Number.isNaN(v) ? "–" : (100 * v).toFixed(d));
-export const fmt = (v, d = 1) => (v === null || v === undefined || Number.isNaN(v) ? "–" : Number(v).toFixed(d));
+const missing = (v) => v === null || v === undefined || Number.isNaN(v);
+export const pct = (v, d = 2) => (missing(v) ? "–" : (100 * v).toFixed(d));
+export const fmt = (v, d = 1) => (missing(v) ? "–" : Number(v).toFixed(d));
+
+// Text from the server or the user, safe inside innerHTML.
+export const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
 
 // The message line answers what the user did (a start, a PUT, a stop); the event log holds what the run reports.
-export function showMsg(text, isErr = false, id = "ctl-msg") {
+export function showMsg(text, kind = false, id = "ctl-msg") {
   const el = $(id);
   el.textContent = text;
-  el.className = isErr ? "msg err" : "msg";
+  el.className = kind === true || kind === "err" ? "msg err" : kind === "warn" ? "msg warn" : "msg";
 }
 
 export function badge(status) {
@@ -28,7 +33,17 @@ export function describeReference(ref) {
   return `${ref.setpoint} K in ${ref.t_E} s`;
 }
 
+// Short form for tables: "1100 K / 120 s" or "3 pts → 1100 K".
+export function shortReference(ref) {
+  if (!ref) return "–";
+  if (typeof ref.points === "number") return `${ref.points} pt${ref.points > 1 ? "s" : ""} \u2192 ${fmt(ref.setpoint, 0)} K`; // a list's summary
+  if (ref.points) return `${ref.points.length} pt${ref.points.length > 1 ? "s" : ""} \u2192 ${fmt(ref.points[ref.points.length - 1][1], 0)} K`;
+  return `${fmt(ref.setpoint, 0)} K / ${fmt(ref.t_E, 0)} s`;
+}
+
 export function describeOscillation(osc) {
   if (!osc) return "–";
   return osc.enabled ? `on (${fmt(1000 * osc.amplitude, 0)} mm, ${fmt(osc.period, 1)} s)` : "off";
 }
+
+export const runName = (r) => (r.label ? `${r.label} (${r.id.slice(0, 6)})` : r.id);

@@ -1,34 +1,60 @@
-// The picked run's samples for the charts: from the live stream (frames) or its stored series.
+// The shown run's samples for the charts: its history (GET /api/runs/{id}/series) continued by the live
+// stream's frames.  Per sample: t, T_ref, fillet mean, TC errors, group powers u and u_ff, the groups at a
+// bound (+1 full power, -1 off), eta; per field sample: T_sup and the spread about the fillet mean.
 
-const MAX_POINTS = 3000; // per trace, older samples are thinned
+const MAX_POINTS = 4000; // per trace; older samples are thinned beyond it
 
 export function emptySeries() {
-  return { t: [], T_ref: [], T_mean_hat: [], tcErr: [[], [], [], []], u: [[], [], [], [], [], []],
-    u_ff: [[], [], [], [], [], []], inh_t: [], inh: [], eta: [], field: null };
+  return { t: [], T_ref: [], T_mean_hat: [], tcErr: [[], [], [], []], tc: null, u: [[], [], [], [], [], []],
+    u_ff: [[], [], [], [], [], []], sat: [], inh_t: [], inh: [], spread: [], eta: [], field: null };
 }
 
+const lastT = (s) => (s.t.length ? s.t[s.t.length - 1] : -Infinity);
+
 export function pushFrame(s, f) {
+  if (f.t <= lastT(s)) { s.field = f.field; s.tc = f.tc; return; } // a repeated sample (a run's last frame)
   s.t.push(f.t); s.T_ref.push(f.T_ref); s.T_mean_hat.push(f.T_mean_hat); s.eta.push(f.eta);
   for (let i = 0; i < 4; i++) s.tcErr[i].push(f.tc[i] === null || f.tc_hat[i] === null ? null : f.tc[i] - f.tc_hat[i]);
   for (let j = 0; j < 6; j++) { s.u[j].push(f.u[j]); s.u_ff[j].push(f.u_ff[j]); }
-  s.inh_t.push(f.t); s.inh.push(f.inhomogeneity);
+  s.sat.push(f.saturated || [0, 0, 0, 0, 0, 0]);
+  s.inh_t.push(f.t); s.inh.push(f.inhomogeneity); s.spread.push(f.spread ?? null);
   s.field = f.field;
+  s.tc = f.tc;
   if (s.t.length > MAX_POINTS) thin(s);
 }
 
 function thin(s) { // keep every other sample: bounded memory for long runs
   const half = (a) => a.filter((_, k) => k % 2 === 0);
-  for (const k of ["t", "T_ref", "T_mean_hat", "eta", "inh_t", "inh"]) s[k] = half(s[k]);
+  for (const k of ["t", "T_ref", "T_mean_hat", "eta", "sat", "inh_t", "inh", "spread"]) s[k] = half(s[k]);
   s.tcErr = s.tcErr.map(half); s.u = s.u.map(half); s.u_ff = s.u_ff.map(half);
 }
 
-// GET /api/runs/{id}/series (a decimated timeseries.npz) as a series buffer.
+// GET /api/runs/{id}/series as a series buffer.
 export function seriesFromStored(d) {
   const s = emptySeries();
+  if (!d.t) return s;
   s.t = d.t; s.T_ref = d.T_ref; s.T_mean_hat = d.T_mean_hat; s.eta = d.eta;
   for (let i = 0; i < 4; i++) s.tcErr[i] = d.tc.map((row, k) => (row[i] === null || d.tc_hat[k][i] === null ? null : row[i] - d.tc_hat[k][i]));
   for (let j = 0; j < 6; j++) { s.u[j] = d.u.map((r) => r[j]); s.u_ff[j] = d.u_ff.map((r) => r[j]); }
-  s.inh_t = d.t_field || []; s.inh = d.inhomogeneity || [];
+  s.sat = d.saturated || d.t.map(() => [0, 0, 0, 0, 0, 0]);
+  s.inh_t = d.t_field || []; s.inh = d.inhomogeneity || []; s.spread = d.spread || [];
   s.field = d.field || null;
+  s.tc = d.tc.length ? d.tc[d.tc.length - 1] : null;
   return s;
+}
+
+// Spans where group j stayed at a bound: [{j, bound (+1 / -1), t0, t1}] from the per-sample flags.
+export function saturationSpans(s) {
+  const spans = [];
+  for (let j = 0; j < 6; j++) {
+    let open = null;
+    for (let k = 0; k < s.t.length; k++) {
+      const b = (s.sat[k] || [])[j] || 0;
+      if (open && b !== open.bound) { spans.push(open); open = null; }
+      if (b && !open) open = { j, bound: b, t0: s.t[k], t1: s.t[k] };
+      if (open) open.t1 = s.t[k];
+    }
+    if (open) spans.push(open);
+  }
+  return spans;
 }

@@ -1,6 +1,7 @@
-// The picked run's websocket stream (WS /api/runs/{id}/stream): frames into the series, events into the log.
+// The shown run's websocket stream (WS /api/runs/{id}/stream): frames into the series, events into the log.
+// While the run's history is being read (state.loading) frames are held, then replayed after it.
 import { token } from "./api.js";
-import { addEvent, noteStatus } from "./events.js";
+import { addEvents, noteStatus } from "./events.js";
 import { $, badge, fmt, LIVE } from "./page.js";
 import { pushFrame } from "./series.js";
 import { state } from "./state.js";
@@ -9,7 +10,20 @@ export function closeStream() {
   if (state.ws) { state.ws.onclose = null; state.ws.close(); state.ws = null; }
 }
 
-// onEnd() is called when the server closes the stream (the run ended or the server went away).
+export function applyFrame(f) {
+  state.lastFrame = f;
+  state.frames += 1;
+  pushFrame(state.series, f);
+  $("run-clock").textContent = `t = ${fmt(f.t)} s`;
+  addEvents(f.event_log);
+  if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
+  if (f.status && !LIVE.includes(f.status)) noteStatus(f.status, f.t);
+  state.dirty = true;
+}
+
+// onEnd() is called when the server closes the stream (the run ended or the server went away).  Returns a
+// promise that settles once the server sends frames to this page (or gave up): read the history after it,
+// so that no sample falls between the history and the first frame.
 export function connectStream(runId, onEnd) {
   closeStream();
   const proto = location.protocol === "https:" ? "wss" : "ws";
@@ -20,17 +34,13 @@ export function connectStream(runId, onEnd) {
   ws.onmessage = (ev) => {
     const f = JSON.parse(ev.data);
     if (f.run_id !== state.runId) return;
-    state.lastFrame = f;
-    state.frames += 1;
-    pushFrame(state.series, f);
-    $("run-clock").textContent = `t = ${fmt(f.t)} s`;
-    if (f.seq === undefined || f.seq > state.eventSeq) { // the last frame of a run may repeat its sample
-      for (const e of f.events || []) addEvent(f.t, e, /fail|error|reject/i.test(e) ? "warn" : "");
-      if (f.seq !== undefined) state.eventSeq = f.seq;
-    }
-    if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
-    if (f.status && !LIVE.includes(f.status)) noteStatus(f.status, f.t);
-    state.dirty = true;
+    if (state.loading) state.held.push(f); else applyFrame(f);
   };
+  const opened = new Promise((resolve) => {
+    ws.onopen = resolve;
+    ws.onerror = resolve;
+    setTimeout(resolve, 5000);
+  });
   ws.onclose = () => { if (state.ws === ws) { state.ws = null; onEnd(); } };
+  return opened;
 }

@@ -59,3 +59,16 @@ def small_radiation(radiation_cache):
     if key not in _RADIATION:
         _RADIATION[key] = radiation_model(small_config(), cache_dir=radiation_cache)
     return _RADIATION[key]
+
+
+@pytest.fixture(scope="session")
+def small_truth_radiation(radiation_cache):
+    """The simulated furnace's own table of ``small_config()`` (``[truth.radiation]``, symmetric trace), kept
+    like the model's."""
+    from twin.config import small_config
+    from twin.furnace.simulated.truth import truth_radiation
+
+    key = f"truth:{radiation_cache}"
+    if key not in _RADIATION:
+        _RADIATION[key] = truth_radiation(small_config(), cache_dir=radiation_cache)
+    return _RADIATION[key]

@@ -57,7 +57,7 @@ def test_a_check_names_the_field_and_the_bound() -> None:
     with pytest.raises(ValidationError) as exc:
         parse_reference({"setpoint": 1300.5}, low)
     assert _locs(exc) == [("transition", "setpoint")] and "material tables" in str(exc.value)
-    with pytest.raises(ValidationError, match="reachable range 250..1300 K"):
+    with pytest.raises(ValidationError, match="reachable range 300..1300 K"):
         parse_reference({"points": [[1.0, 1400.0]]}, low)
     # a scenario built without a furnace carries the default furnace's amplitude: the check names it
     with pytest.raises(ValidationError) as exc:
@@ -81,7 +81,9 @@ def test_server_caps_and_json_shape() -> None:
     assert j["oscillation"]["amplitude"] == {"min": 0.0, "max": 0.05, "exclusive_min": False, "unit": "m",
                                              "default": pytest.approx(0.048)}
     assert j["reference"]["setpoint"]["exclusive_min"] is True and j["speed"]["default"] == "max"
-    assert set(j) == {"reference", "duration", "oscillation", "tc4", "speed", "mismatch", "tc_noise", "seed"}
+    assert set(j) == {"reference", "duration", "oscillation", "tc4", "speed", "mismatch", "tc_noise", "seed", "truth"}
+    # issue 10: the honest truth is the default everywhere, the model's own plant one choice away
+    assert j["truth"] == {"choices": ["independent", "shared"], "default": "independent"}
 
 
 def test_furnace_name(tmp_path) -> None:

@@ -21,7 +21,10 @@ def test_defaults_are_the_product_contract():
         "mismatch": {"emissivity": 0.0, "alpha": 0.0, "lamp_efficiency": 0.0},
         "tc_noise": 1.0,
         "seed": 0,
+        "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
     }
+    with pytest.raises(ValidationError, match="truth"):
+        Scenario.model_validate({"truth": "model"})
 
 
 def test_reference_forms_are_told_apart():

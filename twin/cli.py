@@ -1,4 +1,4 @@
-"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench.
+"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, study.
 
 Each sub-command lives in its own module and is imported only when used, so
 ``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
@@ -28,6 +28,16 @@ def _rel_point(text: str) -> tuple[float, float]:
     return (x, y)
 
 
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError("must be at least 1")
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="furnace-twin", description=__doc__.splitlines()[0])
     p.add_argument("--config", help="furnace TOML file, or a shipped furnace: default, banded (default: default)")
@@ -40,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--viser-port", type=int, default=8080)
     s.add_argument("--data-dir", default=None, help="runs database and recordings (default ./furnace-data)")
 
-    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached)")
+    s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached): the twin's "
+                       "model's and the simulated furnace's own")
     s.add_argument("--force", action="store_true", help="recompute even if cached")
 
     s = sub.add_parser("simulate", help="open-loop plant run: timeseries.npz and PNG figures")
@@ -53,6 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=float, default=None, help="s (default 18)")
     s.add_argument("--tc4", type=_rel_point, default=(0.5, 0.5))
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant")
     s.add_argument("--out", default="out/simulate")
 
     s = sub.add_parser("run", help="one headless closed-loop run")
@@ -62,13 +75,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/run")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
-    s = sub.add_parser("campaign", help="the paper's six experiments and a comparison table")
+    s = sub.add_parser("campaign", help="the paper's six experiments, several seeds each, and a comparison table")
     s.add_argument("--out", default="out/campaign")
     s.add_argument("--json", action="store_true")
     s.add_argument("--t-e", type=float, default=None, help="shorten the transition time (s) for a quick look")
+    s.add_argument("--seeds", type=int, default=5, help="seeds per experiment (0 .. N-1; TC noise and biases)")
+    s.add_argument("--truth", choices=("independent", "shared"), default="independent",
+                   help="the simulated furnace: its own [truth] (default) or the model's plant, to compare")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+
+    s = sub.add_parser("study", help="a design study (grid and/or Monte Carlo of runs) on Dask distributed")
+    s.add_argument("file", help="study TOML file (product.md: furnace, [base], [grid], [monte_carlo])")
+    s.add_argument("--out", default=None, help="study folder (default out/studies/<file name>); re-run to resume")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, default=None,
+                       help="LocalCluster process workers (default: one per core)")
+    where.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    s.add_argument("--json", action="store_true", help="print the study result as JSON")
+    s.add_argument("--keep-series", action="store_true", help="keep each case's timeseries.npz")
+    for sp in sub.choices.values():  # --config also after the command (furnace-twin campaign --config banded)
+        sp.add_argument("--config", default=argparse.SUPPRESS, help="as before the command")
     return p
 
 
@@ -102,9 +130,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir,
                          furnace=args.config or os.environ.get(CONFIG_ENV_VAR))
         if args.command == "precompute":
+            from twin.furnace.simulated.truth import precompute_truth
             from twin.radiation.cache import precompute_command
 
-            return precompute_command(cfg, force=args.force)
+            status = precompute_command(cfg, force=args.force)
+            precompute_truth(cfg, force=args.force)  # the simulated furnace's own table
+            return status
         if args.command == "simulate":
             from twin.runs.open_loop import simulate_command
 
@@ -121,6 +152,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.runs.bench import bench_command
 
             return bench_command(cfg, args)
+        if args.command == "study":
+            from twin.studies.command import study_command
+
+            return study_command(cfg, args)
     except ConfigError as exc:
         print(f"furnace-twin: {exc}", file=sys.stderr)  # noqa: T201
         return 2

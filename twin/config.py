@@ -360,6 +360,56 @@ class LQGWeights(_Section):
     delta0: float = Field(gt=0)
 
 
+class TruthRadiation(_Section):
+    """The simulated furnace's own exchange factors: an independent, mirror-symmetric ray trace."""
+
+    rays_per_specimen_cell: int = Field(ge=10)
+    rays_per_lamp: int = Field(ge=10)
+    rays_per_wall: int = Field(ge=10)
+    seed: int = Field(ge=0)
+
+
+class TruthMaterial(_Section):
+    """Latent heat of the alpha-gamma transformation, added to c_p over its temperature range."""
+
+    latent_heat: float = Field(ge=0, description="J/kg")
+    transformation_range: tuple[float, float] = Field(description="K, start and end of the transformation")
+
+    @model_validator(mode="after")
+    def _range(self) -> Self:
+        lo, hi = self.transformation_range
+        if not 0 < lo < hi:
+            raise ValueError("transformation_range: need 0 < start < end (K)")
+        return self
+
+
+class TruthThermocouples(_Section):
+    time_constant: float = Field(ge=0, le=60.0, description="first-order lag of every TC (s); 0 = instantaneous")
+    bias: float = Field(ge=0, le=5.0, description="per-TC bias as a fraction of the class-1 tolerance band")
+
+
+class TruthLamps(_Section):
+    time_constant: float = Field(ge=0, le=60.0, description="filament lag, command to radiated power (s)")
+
+
+class TruthDeviations(_Section):
+    """Relative deviations of the furnace from the model, as the scenario's ``mismatch`` (0.05 = +5 %)."""
+
+    emissivity: float = Field(ge=-0.5, le=0.1)
+    alpha: float = Field(ge=-0.9, le=2.0)
+    lamp_efficiency: float = Field(ge=-0.5, le=0.5)
+
+
+class Truth(_Section):
+    """How the simulated furnace differs from the twin's model (scenario ``"truth": "independent"``)."""
+
+    radiation: TruthRadiation
+    material: TruthMaterial
+    thermocouples: TruthThermocouples
+    lamps: TruthLamps
+    deviations: TruthDeviations
+
+
 class FurnaceConfig(_Section):
     """The whole furnace.  Immutable; derive variants with :meth:`with_overrides`."""
 
@@ -380,6 +430,7 @@ class FurnaceConfig(_Section):
     calibration: Calibration
     feedforward: FeedforwardWeights
     lqg: LQGWeights
+    truth: Truth
 
     @model_validator(mode="after")
     def _relations(self) -> Self:
@@ -417,6 +468,10 @@ class FurnaceConfig(_Section):
             raise ValueError("window.distance: the window must lie between specimen and vertical lamps")
         if self.window.distance <= self.holders.jaw_thickness + s.thickness / 2:
             raise ValueError("window.distance: the window would cut the holder jaws")
+        eps_truth = s.emissivity * (1.0 + self.truth.deviations.emissivity)
+        if eps_truth + s.specular_reflectivity > 1.0 + 1e-12:
+            raise ValueError(f"truth.deviations.emissivity: the furnace's specimen emissivity {eps_truth:g} "
+                             f"plus its specular reflectivity exceeds 1")
         return self
 
     # ---- derived geometry (one place) ----
@@ -563,7 +618,7 @@ def load_config(path: str | os.PathLike[str] | None = None) -> FurnaceConfig:
 
 
 def small_config() -> FurnaceConfig:
-    """The default furnace with a cheap radiation table, for the test suite.
+    """The default furnace with cheap radiation tables (the model's and the truth's), for the test suite.
 
     Same geometry, fewer rays and only 5 eta positions; everything else unchanged.
     """
@@ -573,5 +628,9 @@ def small_config() -> FurnaceConfig:
             "radiation.rays_per_lamp": 8000,
             "radiation.rays_per_wall": 4000,
             "oscillation.positions": 5,
+            # the truth's own table, as cheap: the symmetric trace needs about a quarter of the rays
+            "truth.radiation.rays_per_specimen_cell": 800,
+            "truth.radiation.rays_per_lamp": 16000,
+            "truth.radiation.rays_per_wall": 8000,
         }
     )

@@ -9,7 +9,8 @@ plant mismatch); the others come from the loaded furnace:
 - period default 0.15 t_E (section 5.2: Pi = 0.15 t_E) with the paper's t_E = 120 s;
 - setpoint above the specimen's initial temperature and at most the top of the material
   tables (beyond it c_p and lambda would be extrapolated), default the paper's 1100 K;
-- reference points at most that top as well;
+- reference point temperatures in that same range (one set of limits for every reference; a point
+  may equal the initial temperature, a setpoint must lie above it);
 - TC4 position and TC noise default to the furnace's ``[sensors]``.
 
 The backend reports them (``GET /api/furnace``) and both UIs build their inputs from them;
@@ -30,7 +31,7 @@ import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from twin.config import DEFAULT_CONFIG_PATH, SHIPPED_FURNACES, FurnaceConfig, load_config
 
@@ -41,7 +42,6 @@ PAPER_PERIOD_PER_T_E = 0.15  # Pi = 0.15 t_E
 PAPER_AMPLITUDE_PITCHES = 3.0  # eta amplitude 3 L_h
 
 MAX_DURATION_S = 3600.0  # longest run and latest reference point the twin accepts
-POINT_T_FLOOR_K = 250.0  # sanity floor of reference points; the reachable range is checked when a run is built
 #: most reference points a scenario or a live change may hold: a C1 curve over at most MAX_DURATION_S needs
 #: no more (one point every 3.6 s), and it bounds the body, the stored scenario and every list of runs
 MAX_REFERENCE_POINTS = 1000
@@ -92,6 +92,10 @@ MISMATCH_EMISSIVITY = Range(-0.5, 0.1, 0.0)
 MISMATCH_ALPHA = Range(-0.9, 2.0, 0.0)
 MISMATCH_LAMP_EFFICIENCY = Range(-0.5, 0.5, 0.0)
 SEED = Range(0, 2**31 - 1, 0)
+#: the simulated furnace's truth (twin.scenario.Scenario.truth): its own, or the model's tables and ideal sensors
+TruthKind = Literal["independent", "shared"]
+TRUTH_CHOICES: tuple[TruthKind, ...] = ("independent", "shared")
+TRUTH_DEFAULT: TruthKind = "independent"
 
 
 @dataclass(frozen=True)
@@ -142,6 +146,7 @@ class ScenarioLimits:
                          "lamp_efficiency": self.mismatch_lamp_efficiency.to_json()},
             "tc_noise": self.tc_noise.to_json(),
             "seed": self.seed.to_json(),
+            "truth": {"choices": list(TRUTH_CHOICES), "default": TRUTH_DEFAULT},
         }
 
 
@@ -155,7 +160,7 @@ def scenario_limits(cfg: FurnaceConfig, name: str | None = None) -> ScenarioLimi
     return ScenarioLimits(
         furnace=name,
         setpoint=Range(T_0, T_top, min(PAPER_SETPOINT_K, T_top), "K", lo_open=True, why=top),
-        point_temperature=Range(POINT_T_FLOOR_K, T_top, None, "K", why=top),
+        point_temperature=Range(T_0, T_top, None, "K", why=top),  # a first point may be the initial temperature
         amplitude=Range(0.0, eta_max, min(PAPER_AMPLITUDE_PITCHES * cfg.lamps.horizontal.pitch, eta_max), "m",
                         why=f"eta_max of furnace '{name}'"),
         tc4=cfg.sensors.tc4,

@@ -206,6 +206,11 @@ class Scenario(_Model):
                             description="TC noise standard deviation, K")
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
     estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
+    truth: lim.TruthKind = Field(
+        lim.TRUTH_DEFAULT,
+        description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
+        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -267,3 +272,22 @@ def check(value: Scenario | OscillationSpec | TransitionReference | PointsRefere
         parse_oscillation(data, limits)
     else:
         parse_reference(data, limits)
+
+
+def describe(value: TransitionReference | PointsReference | OscillationSpec) -> str:
+    """A reference or an oscillation in a few plain words (the run's events, the dashboard).
+
+    >>> describe(TransitionReference(setpoint=1050.0, t_E=30.0)), describe(OscillationSpec())
+    ('1050 K in 30 s', 'off')
+    >>> describe(PointsReference(points=[(20.0, 1000.0), (60.0, 1050.0)]))
+    'points 20 s → 1000 K, 60 s → 1050 K'
+    """
+    if isinstance(value, OscillationSpec):
+        if not value.enabled:
+            return "off"
+        return f"on ({1000 * value.amplitude:.0f} mm, {value.period:g} s)"
+    if isinstance(value, PointsReference):
+        pts = [f"{t:g} s → {T:g} K" for t, T in value.points]
+        more = f", … ({len(pts)} points)" if len(pts) > 4 else ""
+        return "points " + ", ".join(pts[:4]) + more
+    return f"{value.setpoint:g} K in {value.t_E:g} s"

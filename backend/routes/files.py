@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, status
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
 from backend.deps import ManagerDep
-from backend.series import load_series
+from backend.series import NoSeries, run_arrays, series_json
 from twin.runs.series_store import has_parts, snapshot_file
 
 router = APIRouter(prefix="/api/runs", tags=["files"])
@@ -47,15 +48,19 @@ def timeseries(run_id: str, manager: ManagerDep) -> FileResponse:
                         background=cleanup)
 
 
-@router.get("/{run_id}/series", responses={404: {"description": "no such run or no time series yet"}})
+@router.get("/{run_id}/series", response_class=Response,
+            responses={200: {"content": {"application/json": {}}},
+                       404: {"description": "no such run or no time series yet"}})
 def series(run_id: str, manager: ManagerDep,
-           max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> dict[str, Any]:
-    """The stored time series as JSON (decimated to ``max_points``) for charts of any run."""
-    path = _file(run_id, manager, "timeseries")
-    try:
-        return load_series(path, max_points)
+           max_points: Annotated[int, Query(ge=10, le=20000)] = 2000) -> Response:
+    """The run's time series so far as JSON (decimated to ``max_points``) for charts of any run: a running
+    run's up to its latest sample, with every event, the live changes and the metric windows
+    (``backend.series``)."""
+    try:  # serialised here, in the worker thread: a big answer never holds up the event loop (the streams)
+        body = json.dumps(series_json(run_arrays(manager, run_id), max_points), allow_nan=False,
+                          separators=(",", ":"))
+        return Response(body, media_type="application/json")
+    except NoSeries as exc:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
     except (OSError, ValueError, KeyError) as exc:  # e.g. a file from an older layout
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read {path.name}: {exc}") from None
-    finally:
-        if path.name.startswith(".timeseries-"):
-            path.unlink(missing_ok=True)
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id}: cannot read its time series: {exc}") from None

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter
 
-from backend.deps import ManagerDep
+from backend.deps import ManagerDep, ScenarioBody
 from backend.schemas import FurnaceOut, LampGroupOut
 from twin.physics.grid import cell_centers
 from twin.scenario import parse_scenario
@@ -34,3 +36,12 @@ def furnace(manager: ManagerDep) -> FurnaceOut:
         limits=limits.to_json(),
         defaults=parse_scenario({}, limits).model_dump(mode="json"),
     )
+
+
+@router.post("/feasibility", responses={422: {"description": "the scenario itself is invalid"}})
+async def feasibility(manager: ManagerDep, scenario: ScenarioBody) -> dict[str, Any]:
+    """Would ``POST /api/runs`` start this scenario, and can the furnace follow its reference?
+    ``verdict``: ``ok``, ``warn`` (starts; ``messages`` say when and by how much the fillet mean falls
+    behind) or ``refuse`` (a 422 on start); ``best``: the closest fillet mean the furnace can reach
+    (``t``, ``T``); ``hold_range``: the means it can hold (lamps off, full power) in K.  Nothing is started."""
+    return await manager.checks.preview(scenario)

@@ -4,12 +4,22 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Query, Response, status
+from fastapi import APIRouter, Header, HTTPException, Query, Response, status
 
 from backend.deps import ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
 from backend.repository import RunRow
 from backend.run_manager import RunManager
-from backend.schemas import ChangeOut, ChangeResult, RunCreated, RunDetail, RunLinks, RunSummary, StopResult
+from backend.schemas import (
+    ChangeOut,
+    ChangeResult,
+    LabelIn,
+    RunCreated,
+    RunDetail,
+    RunLinks,
+    RunSummary,
+    StopResult,
+)
+from twin.runs.metrics import windows_from
 
 router = APIRouter(prefix="/api/runs", tags=["runs"])
 
@@ -41,18 +51,29 @@ def summary(row: RunRow, manager: RunManager, *, whole: bool = True) -> RunSumma
         latest=row.latest,
         metrics=row.metrics,
         error=row.error,
+        label=row.label,
         links=links(row.id),
     )
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=RunCreated, dependencies=[TokenDep],
-             responses={422: {"description": "invalid scenario, or over the furnace's or the server's limits"},
+             responses={200: {"description": "a repeated Idempotency-Key: the run the first request started"},
+                        409: {"description": "the Idempotency-Key was used for another scenario"},
+                        422: {"description": "invalid scenario, over the furnace's or the server's limits, or a "
+                                             "reference this furnace cannot follow by a wide margin"},
                         429: {"description": "too many runs at once"}})
-async def start_run(manager: ManagerDep, scenario: ScenarioBody) -> RunCreated:
+async def start_run(
+    manager: ManagerDep, scenario: ScenarioBody, response: Response,
+    idempotency_key: Annotated[str | None, Header(max_length=100, description="a client's id for this start: the "
+                                                  "same id again returns the same run instead of a second one")] = None,
+) -> RunCreated:
     """Start a closed-loop run of the scenario (every field has a default: the furnace's, see
-    ``GET /api/furnace``). 201 with the run id."""
-    run_id = await manager.start(scenario)
-    return RunCreated(id=run_id, status=manager.status(run_id) or "queued", links=links(run_id))
+    ``GET /api/furnace``). 201 with the run id and what the feasibility check warns about."""
+    started = await manager.launch(scenario, idempotency_key)
+    if started.replayed:
+        response.status_code = status.HTTP_200_OK
+    return RunCreated(id=started.run_id, status=manager.status(started.run_id) or manager.run(started.run_id).status,
+                      links=links(started.run_id), warnings=list(started.warnings), replayed=started.replayed)
 
 
 @router.get("", response_model=list[RunSummary])
@@ -68,14 +89,36 @@ def get_run(run_id: str, manager: ManagerDep) -> RunDetail:
     row = manager.run(run_id)
     files = manager.files(row.id)
     now = manager.in_force(row.id)
+    changes = manager.changes(row.id)
+    ref = row.scenario.get("reference") or {}
+    end = (ref["points"][-1][0], ref["points"][-1][1]) if "points" in ref else (ref.get("t_E"), ref.get("setpoint"))
+    windows = None if end[0] is None or end[1] is None else windows_from(  # as the metrics count them
+        float(end[0]), float(end[1]),
+        ((c.applied_t, c.kind, c.body) for c in changes if c.status == "applied" and c.applied_t is not None))
     return RunDetail(
         **summary(row, manager).model_dump(),
         reference=now.reference,
         oscillation=now.oscillation,
-        changes=[ChangeOut(**c.__dict__) for c in manager.changes(row.id)],
+        changes=[ChangeOut(**c.__dict__) for c in changes],
         files={"recording": files.recording.is_file(), "timeseries": files.timeseries.is_file(),
                "metrics": files.metrics.is_file()},
+        windows=None if windows is None else windows.to_json(),
     )
+
+
+@router.patch("/{run_id}", response_model=RunSummary, dependencies=[TokenDep],
+              responses={404: {"description": "no such run"}, 422: {"description": "label too long"}})
+def label_run(run_id: str, manager: ManagerDep, body: LabelIn) -> RunSummary:
+    """Name the run (``{"label": "fixed, TC4 middle"}``; null or empty removes the name)."""
+    return summary(manager.set_label(run_id, body.label), manager)
+
+
+@router.delete("/{run_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=[TokenDep],
+               responses={404: {"description": "no such run"}, 409: {"description": "the run is still going"}})
+def delete_run(run_id: str, manager: ManagerDep) -> Response:
+    """Delete a run that has ended, with its files (recording, time series, metrics); a running run is a 409."""
+    manager.delete(run_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.post("/{run_id}/stop", response_model=StopResult, status_code=status.HTTP_202_ACCEPTED,

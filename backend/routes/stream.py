@@ -33,17 +33,24 @@ async def stream(ws: WebSocket, run_id: str) -> None:
         await _deny(ws, 404, str(exc))
         return
     hub = manager.hub(run_id)
+    # subscribed before the handshake completes: a page that reads the run's history once the stream is open
+    # gets every frame after it (none falls between the history and the first frame)
+    sub = hub.subscribe() if hub is not None else None
     # a browser sends its token as a subprotocol (backend.security); answer with ours, never the token
     offered = ws.scope.get("subprotocols") or []
-    await ws.accept(subprotocol=STREAM_SUBPROTOCOL if STREAM_SUBPROTOCOL in offered or any(
-        p.startswith(TOKEN_SUBPROTOCOL) for p in offered) else None)
-    if hub is None:
+    try:
+        await ws.accept(subprotocol=STREAM_SUBPROTOCOL if STREAM_SUBPROTOCOL in offered or any(
+            p.startswith(TOKEN_SUBPROTOCOL) for p in offered) else None)
+    except BaseException:
+        if hub is not None and sub is not None:
+            hub.unsubscribe(sub)
+        raise
+    if hub is None or sub is None:
         last = manager.last_frame(run_id)
         if last is not None:
             await ws.send_text(last)
         await ws.close(code=1000, reason="the run has ended")
         return
-    sub = hub.subscribe()
     send_timeout = ws.app.state.settings.client_send_timeout_s
 
     async def watch_disconnect() -> None:

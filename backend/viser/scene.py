@@ -4,14 +4,17 @@ The specimen plate is coloured per vertex by the estimated field and moves with 
 the two lamp arrays; each lamp is coloured by its group's power (dark = off, bright yellow =
 u_max); the gold reflectors, the holders (moving with the plate), the quartz window and,
 optionally, the housing are drawn from ``twin.physics.geometry.display_meshes``.  TC markers
-show their readings.  :meth:`FurnaceScene.show` puts one snapshot on the scene in one
+show their readings; labels name the lamp groups (at each grouped lamp's end), the reflectors,
+the holders and the window.  The camera looks at the horizontal-lamp (+z) face with y up, so the
+specimen's length x runs left to right as on the dashboard's heat map (x = 0, the upper holder in
+the real furnace, on the left).  :meth:`FurnaceScene.show` puts one snapshot on the scene in one
 ``server.atomic()`` block.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import trimesh
@@ -27,6 +30,7 @@ LAMP_ON = np.array([255, 236, 80], dtype=float)
 MIN_SPAN_K = 10.0  # colour range of the plate spans at least this many kelvin
 #: shadows cost a lot in software WebGL (headless browsers, remote desktops) and add nothing here
 NO_SHADOW: dict[str, Any] = {"cast_shadow": False, "receive_shadow": False}
+Anchor = Literal["top-center", "bottom-center", "center-left", "center-right", "bottom-right"]
 
 
 def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -91,24 +95,28 @@ class FurnaceScene:
         self.housing: list[Any] = []
         self.tc_markers: list[Any] = []
         self.tc_labels: list[Any] = []
+        self.labels: dict[str, Any] = {}  # the names of the parts on the scene (scene node -> label handle)
         self.plate_rgb: np.ndarray | None = None  # vertex colours on the plate now
         self._lamp_rgb: np.ndarray | None = None
         self._build()
 
     def _build(self) -> None:
         sc, s = self.server.scene, self.cfg.specimen
-        sc.set_up_direction("-x")  # x points down along the specimen (default_furnace.toml frame)
-        # from the vertical-lamp side: those lamps are sparse, so the plate is seen between them
-        self.server.initial_camera.position = (s.length / 2 + 0.05, s.width / 2 + 0.32, -0.55)
+        # the heat map's orientation: x (the length) to the right, y (the width) up, seen from +z
+        sc.set_up_direction("+y")
+        self.server.initial_camera.position = (s.length / 2, s.width / 2 - 0.38, 0.52)  # a little from below
         self.server.initial_camera.look_at = (s.length / 2, s.width / 2, 0.0)
-        self.server.initial_camera.up = (-1.0, 0.0, 0.0)
-        for name, kind, verts, faces in display_meshes(self.cfg, 0.0):
+        self.server.initial_camera.up = (0.0, 1.0, 0.0)
+        meshes = display_meshes(self.cfg, 0.0)
+        self._add_labels(meshes)
+        for name, kind, verts, faces in meshes:
             if kind == "lamp":
                 self.lamps.append(sc.add_mesh_simple(f"/furnace/lamps/{name}", verts, faces, color=tuple(LAMP_OFF),
                                                      **NO_SHADOW))
-            elif kind == "reflector":
-                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=GOLD, opacity=0.18, side="double",
-                                   **NO_SHADOW)
+            elif kind == "reflector":  # the one between the camera (+z) and the plate only a faint tint
+                near = float(np.mean(verts[:, 2])) > 0
+                sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=GOLD, opacity=0.05 if near else 0.18,
+                                   side="double", **NO_SHADOW)
             elif kind == "holder":
                 self.holders.append(sc.add_mesh_simple(f"/furnace/{name}", verts, faces, color=(110, 120, 135),
                                                        **NO_SHADOW))
@@ -129,6 +137,51 @@ class FurnaceScene:
             self.tc_labels.append(sc.add_label(f"/furnace/tc/TC{k + 1}/label", f"TC{k + 1}",
                                                position=(0.0, 0.0, 0.0),
                                                anchor="bottom-left" if k == 1 else "top-left"))
+
+    def _add_labels(self, meshes: list[tuple[str, str, np.ndarray, np.ndarray]]) -> None:
+        """Names on the scene: each lamp group once per block of neighbouring lamps (horizontal lamps at their
+        top or bottom end, vertical lamps at their left or right end, alternating by group so that neighbours do
+        not cover each other), the reflectors, the holders and the window."""
+        sc = self.server.scene
+        boxes = {name: (verts.min(axis=0), verts.max(axis=0)) for name, _, verts, _ in meshes}
+        for gi, g in enumerate(self.cfg.lamps.groups):
+            numbers: dict[str, list[int]] = {}
+            for lamp in g.lamps:
+                side, k = lamp[0], int(lamp[1:])
+                count = self.cfg.lamps.horizontal.count if side == "h" else self.cfg.lamps.vertical.count
+                numbers.setdefault(side, []).append(k if k > 0 else count + 1 + k)
+            for side, ks in numbers.items():
+                blocks: list[list[int]] = []
+                for k in sorted(ks):  # neighbouring lamps form one block, labelled once
+                    if blocks and k == blocks[-1][-1] + 1:
+                        blocks[-1].append(k)
+                    else:
+                        blocks.append([k])
+                for bi, block in enumerate(blocks):
+                    lo = np.min([boxes[f"{side}{k}"][0] for k in block], axis=0)
+                    hi = np.max([boxes[f"{side}{k}"][1] for k in block], axis=0)
+                    first = gi % 2 == 0
+                    anchor: Anchor
+                    if side == "h":  # axis along y: at the top (+y) or bottom end
+                        pos = (0.5 * (lo[0] + hi[0]), hi[1] if first else lo[1], hi[2])
+                        anchor = "bottom-center" if first else "top-center"
+                    else:  # axis along x: at the left or right end
+                        pos = (lo[0] if first else hi[0], 0.5 * (lo[1] + hi[1]), lo[2])
+                        anchor = "center-right" if first else "center-left"
+                    node = f"/labels/groups/{g.name}-{side}{bi}"
+                    self.labels[node] = sc.add_label(node, g.name, position=pos, anchor=anchor)
+        words = {"reflector_h": "gold reflector (horizontal lamps)", "reflector_v": "gold reflector (vertical lamps)",
+                 "holder_upper": "upper holder (x = 0)", "holder_lower": "lower holder", "window": "quartz window"}
+        for name, text in words.items():
+            if name not in boxes:
+                continue
+            lo, hi = boxes[name]
+            where: Anchor
+            if name.startswith("reflector"):
+                pos, where = (hi[0], hi[1], hi[2]), "bottom-right"
+            else:
+                pos, where = (0.5 * (lo[0] + hi[0]), lo[1], hi[2]), "top-center"
+            self.labels[f"/labels/{name}"] = sc.add_label(f"/labels/{name}", text, position=pos, anchor=where)
 
     def show_housing(self, visible: bool) -> None:
         with self.server.atomic():

@@ -3,7 +3,7 @@
 The "Run" dropdown picks what the scene shows: "newest running" (the default) follows the
 newest active run; a running run is followed live; a finished (stopped, interrupted, ...) run
 shows its last estimated field from its ``timeseries.npz``.  The live controls act on the shown
-run only while it runs.
+run only while it runs, and are disabled otherwise (a finished run, or no running run to follow).
 
 The view runs on viser's own thread and port (always 127.0.0.1), behind the gate of
 ``backend.viser.gate``: loopback Host, its own Origin, and with an API token set only a window that
@@ -25,6 +25,7 @@ import viser
 from pydantic import ValidationError
 
 from backend.frames import SnapshotLike
+from backend.messages import field_path, plain_errors
 from backend.repository import ACTIVE_STATUSES, RunRow
 from backend.run_manager import RunManager
 from backend.viser.controls import AUTO, Controls, build_controls
@@ -84,6 +85,7 @@ class FurnaceView:
         self._static_key: tuple[str, str] | None = None  # (run id, status) of a finished run on the scene
         self._labels: dict[str, str | None] = {AUTO: None}  # dropdown entry -> run id
         self._options_at = 0.0
+        self._live_controls: bool | None = None  # whether the live controls are enabled now
 
     @property
     def url(self) -> str:
@@ -193,10 +195,9 @@ class FurnaceView:
         assert self.gui is not None
         try:
             return self.manager.call_from_thread(make())
-        except ValidationError as exc:
-            self.gui.say("**refused:** " + "; ".join(
-                f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
-                for e in exc.errors()))
+        except ValidationError as exc:  # the same plain sentences as the REST API's 422s
+            self.gui.say("**refused:** " + "; ".join(f"{field_path(e['loc'])}: {e['msg']}"
+                                                     for e in plain_errors(exc.errors())))
         except Exception as exc:
             self.gui.say(f"**refused:** {exc}")
         return None
@@ -253,10 +254,22 @@ class FurnaceView:
         return self._followed() or self._shown_id
 
     # ------------------------------------------------------------------ updates
+    def sync_controls(self) -> None:
+        """Enable the live controls only while there is a running run for them to act on."""
+        assert self.gui is not None
+        live = self._followed() is not None
+        if live == self._live_controls:
+            return
+        self._live_controls = live
+        g = self.gui
+        for handle in (g.new_setpoint, g.new_t_E, g.change_reference, g.toggle_oscillation, g.stop):
+            handle.disabled = not live
+
     def update(self) -> None:
         """One scene update (the view's thread calls it at <= ``UPDATE_HZ``)."""
         assert self.gui is not None
         self.refresh_runs()
+        self.sync_controls()
         run_id = self.target()
         if run_id is None:
             return

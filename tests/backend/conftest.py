@@ -103,12 +103,14 @@ class FakeLoop:
         t_next = round(self.t + self.cfg.sampling.t_s, 9)  # like ClosedLoop: from the next sample on
         self.reference, self.ref_t0, self.T_start = ref, t_next, self.T_ref(self.t)
         self.events.append(f"reference changed at t = {t_next:.1f} s")
+        self.record.note_change(t_next, "reference", ref.model_dump_json())  # like ClosedLoop: the windows move
 
     def set_oscillation(self, spec: Any) -> None:
         time.sleep(self.replan_s)
         self.oscillation = spec
         t_next = round(self.t + self.cfg.sampling.t_s, 9)
         self.events.append(f"oscillation {'on' if spec.enabled else 'off'} at t = {t_next:.1f} s")
+        self.record.note_change(t_next, "oscillation", spec.model_dump_json())
 
     def timeseries(self) -> dict[str, Any]:
         return self.record.arrays()
@@ -210,3 +212,39 @@ def stream_frames(c: Any, run_id: str, on_frame=None) -> list[dict]:
             if on_frame is not None:
                 on_frame(f)
     return frames
+
+
+#: a valid 1 x 1 PNG (the fake study's figure)
+PNG_1X1 = bytes.fromhex("89504e470d0a1a0a0000000d4948445200000001000000010806000000"
+                        "1f15c4890000000d49444154789c6360f8cf00000301010018dd8db00000000049454e44ae426082")
+
+
+class FakeStudyRunner:
+    """Stands in for ``twin.studies.engine.run_study`` where a test is about the studies API's plumbing:
+    every case is done with ``inhomogeneity_steady = 0.01 (index + 1)``, after ``block_s`` or a stop."""
+
+    def __init__(self, block_s: float = 0.0) -> None:
+        self.block_s = block_s
+        self.calls: list[Any] = []
+
+    def __call__(self, spec: Any, cfg: Any, out: Path, *, cases: Any, on_progress: Any, stop: Any,
+                 **_: Any) -> dict[str, Any]:
+        from twin.studies.engine import StudyProgress
+
+        self.calls.append(spec)
+        on_progress(StudyProgress(len(cases), 0, 0, 0, 1))
+        if self.block_s:
+            stop.wait(self.block_s)
+        stopped = stop.is_set()
+        rows = [{"key": c.key, "index": c.index, "params": c.params, "status": "pending" if stopped else "done",
+                 "metrics": None if stopped else {"inhomogeneity_steady": 0.01 * (c.index + 1)}, "error": None}
+                for c in cases]
+        pending = sum(r["status"] == "pending" for r in rows)
+        figure = out / "figures" / "heatmap_inhomogeneity_steady.png"
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        figure.write_bytes(PNG_1X1)
+        summary = {"cases": rows, "computed": len(rows) - pending, "skipped": 0, "failed": 0, "pending": pending,
+                   "workers": 1, "wall_s": 0.0, "results": str(out / "results.parquet"), "timing": None,
+                   "figures": [str(figure)]}
+        (out / "summary.json").write_text(json.dumps(summary))
+        return summary

@@ -129,6 +129,7 @@ def test_422s_name_the_field(tmp_path, small_cfg) -> None:
             ({"bogus": 1}, "bogus"),
             ({"duration": 200.0}, "duration"),  # over this server's limit of 100 s
             ({"speed": 50.0, "duration": 10.0}, "speed"),  # over this server's limit of 10
+            ({"truth": "model"}, "truth"),  # "independent" or "shared"
         ]
         for body, field in cases:
             r = c.post("/api/runs", json=body)
@@ -252,7 +253,7 @@ def test_bad_points_get_422_that_says_why(tmp_path, small_cfg) -> None:
             ({"points": [[10.0, 2000.0]]}, "2000"),
             ({"points": []}, "at least 1"),
             ({"points": [[1.0, 2.0, 3.0]]}, "at most 2"),
-            ({"points": [[1.0, "hot"]]}, "valid number"),
+            ({"points": [[1.0, "hot"]]}, "must be a number"),
             ({"points": [[10.0, 1280.0]]}, "unreachable"),  # the (fake) furnace holds at most 1250 K
         ]
         for ref, why in bad:

@@ -15,6 +15,9 @@ class _FakeFactory:
     def radiation(self, cfg):
         return None
 
+    def truth_radiation(self, cfg):
+        return None
+
     def __call__(self, cfg, scenario, *, budget=None):
         return fake_factory(step_cost_s=0.005)(cfg, scenario)
 

@@ -50,6 +50,8 @@ def test_furnace_describes_itself_and_every_limit(tmp_path, low_stroke) -> None:
     assert lim["reference"]["setpoint"]["min"] == 300.0 and lim["reference"]["setpoint"]["exclusive_min"]
     assert lim["reference"]["points"]["temperature"]["max"] == 1300.0
     assert f["defaults"]["oscillation"] == {"enabled": False, "amplitude": 0.03, "period": 18.0}
+    assert lim["truth"] == {"choices": ["independent", "shared"], "default": "independent"}
+    assert f["defaults"]["truth"] == "independent"
 
 
 def test_amplitude_above_eta_max_is_422_on_post_and_put(tmp_path, low_stroke) -> None:

@@ -19,10 +19,12 @@ from backend.app import create_app
 from backend.settings import Settings
 from conftest import stream_frames, wait_status
 
-# 30 s: a change is in force once re-planned, which takes seconds of wall time on a loaded machine
-SCENARIO = {"duration": 30.0, "speed": 3.0, "reference": {"setpoint": 900.0, "t_E": 6.0}, "seed": 3}
-REF_AT, NEW_REF = 3.0, {"setpoint": 950.0, "t_E": 2.0}
+# 30 s: a change is in force once re-planned, which takes seconds of wall time on a loaded machine; short and
+# steep, yet within what the furnace can follow (twin.control.feasibility: warned, not refused)
+SCENARIO = {"duration": 30.0, "speed": 3.0, "reference": {"setpoint": 700.0, "t_E": 6.0}, "seed": 3}
+REF_AT, NEW_REF = 3.0, {"setpoint": 600.0, "t_E": 3.0}
 OSC_AT, NEW_OSC = 5.0, {"enabled": True, "amplitude": 0.03, "period": 2.0}
+ABSURD_AT = 8.0
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +34,7 @@ def finished_run(tmp_path_factory, small_cfg):
         r = c.post("/api/runs", json=SCENARIO)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
-        changes: dict = {}
+        changes: dict = {"warnings": r.json()["warnings"]}
 
         def change(f: dict) -> None:
             if "reference" not in changes and f["t"] >= REF_AT:
@@ -41,6 +43,8 @@ def finished_run(tmp_path_factory, small_cfg):
             if "oscillation" not in changes and f["t"] >= OSC_AT:
                 resp = c.put(f"/api/runs/{run_id}/oscillation", json=NEW_OSC)
                 changes["oscillation"] = (resp, time.time())
+            if "absurd" not in changes and f["t"] >= ABSURD_AT:  # +600 K in 1.5 s: refused, nothing changes
+                changes["absurd"] = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1250.0, "t_E": 1.5})
 
         frames = stream_frames(c, run_id, change)
         body = wait_status(c, run_id, {"finished", "error"})
@@ -77,10 +81,10 @@ def test_reference_change_visible_in_frames(finished_run) -> None:
     assert change["status"] == "applied"
     t0 = change["applied_t"]
     frames = finished_run["frames"]
-    assert max(f["T_ref"] for f in frames if f["t"] <= t0) <= 900.0 + 1e-6  # old setpoint, still ramping
-    # the new reference holds 950 K once its 2 s transition is over (C1 transition, then constant)
+    assert max(f["T_ref"] for f in frames if f["t"] <= t0) <= 700.0 + 1e-6  # old setpoint, still ramping
+    # the new reference holds 600 K once its 3 s transition is over (C1 transition, then constant)
     settled = [f["T_ref"] for f in frames if f["t"] >= t0 + NEW_REF["t_E"] + 0.2]
-    assert settled and all(abs(T - 950.0) < 0.5 for T in settled)
+    assert settled and all(abs(T - 600.0) < 0.5 for T in settled)
     # the stream shows the change within a second of the answer (wall clock of the sample)
     assert _first_frame_after(frames, t0)["wall_time"] - answered < 1.0
 
@@ -96,7 +100,14 @@ def test_oscillation_toggle_visible_in_frames(finished_run) -> None:
     assert 0.02 < max(late) <= 0.03 + 1e-9
     assert _first_frame_after(frames, t0)["wall_time"] - answered < 1.0
     kinds = [(ch["kind"], ch["status"]) for ch in finished_run["body"]["changes"]]
-    assert kinds == [("reference", "applied"), ("oscillation", "applied")]
+    assert kinds == [("reference", "applied"), ("oscillation", "applied")]  # the absurd one never reached the run
+
+
+def test_feasibility_warns_at_the_start_and_refuses_an_absurd_change(finished_run) -> None:
+    warnings = finished_run["changes"]["warnings"]  # 700 K in 6 s is steeper than full power allows
+    assert warnings and "at t = " in warnings[0] and "K short" in warnings[0]
+    absurd = finished_run["changes"]["absurd"]
+    assert absurd.status_code == 422 and "cannot follow the new reference" in absurd.json()["detail"]
 
 
 def test_files_and_metrics(finished_run, small_cfg) -> None:
@@ -121,6 +132,16 @@ def test_files_and_metrics(finished_run, small_cfg) -> None:
         else:
             assert metrics[k] == pytest.approx(v, rel=1e-9), k
     assert json.loads((finished_run["folder"] / "metrics.json").read_text()) == metrics
+    # the live changes and the run's events are in the time series (the metric windows follow the reference)
+    applied = {ch["kind"]: ch["applied_t"] for ch in finished_run["body"]["changes"]}
+    assert [str(k) for k in z["change_kind"]] == ["reference", "oscillation"]
+    np.testing.assert_allclose(z["change_t"], [applied["reference"], applied["oscillation"]])
+    assert json.loads(str(z["change_json"][0])) == NEW_REF
+    texts = [str(e) for e in z["event_text"]]
+    assert texts[0].startswith("run started") and texts[1].startswith("feasibility:") and texts[-1] == "run finished"
+    assert any(t.startswith("reference change requested at t = ") and t.endswith(": 600 K in 3 s") for t in texts)
+    assert any(t.startswith("re-planned (reference changed at t = ") and "to 600 K in 3 s" in t for t in texts)
+    assert len(z["event_level"]) == len(texts)  # (a re-plan may still be solving when this short run ends)
 
 
 def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
@@ -135,7 +156,7 @@ def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
     assert out.returncode == 0, out.stderr[-2000:]
     for entity in ("/field/estimated", "/field/true", "/field/fillet", "/field/tc", "/temperature/T_ref",
                    "/temperature/T_mean_hat", "/tc/reading/TC1", "/tc/reading/TC4", "/tc/error/TC4",
-                   "/power/u/T1h", "/power/u_ff/T2v", "/eta", "/inhomogeneity/estimated"):
+                   "/power/u/T1h", "/power/u_ff/T2v", "/eta", "/inhomogeneity/estimated", "/events"):
         assert entity in out.stdout, entity
     verify = subprocess.run([str(rerun), "rrd", "verify", str(rrd)], capture_output=True, text=True, env=env,
                             timeout=120)
@@ -143,11 +164,13 @@ def test_recording_opens_with_rerun_cli(finished_run, isolated_home) -> None:
 
 
 def test_unreachable_reference_is_refused_before_a_run_starts(tmp_path, small_cfg) -> None:
-    """With the real loop factory, POST checks the reference against the furnace's reachable range:
-    a 422 that says why, instead of a run that would end in error while building its loop."""
+    """With the real loop factory, POST checks the reference against what the furnace can hold: a 422
+    that says why, instead of a run that would end far from its reference."""
     with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg), base_url="http://127.0.0.1") as c:
-        # 260 K is colder than every surface around the specimen (pydantic allows 250 K and up)
-        r = c.post("/api/runs", json={"reference": {"points": [[5.0, 900.0], [10.0, 260.0]]}})
+        # 350 K is above the initial 300 K, but with the lamps off the warm holders and walls keep the
+        # specimen near 480 K (twin.control.feasibility.hold_range): the last point cannot be held
+        r = c.post("/api/runs", json={"reference": {"points": [[60.0, 900.0], [120.0, 350.0]]}, "duration": 240.0})
         assert r.status_code == 422, r.text
-        assert "unreachable" in r.json()["detail"] and "260.0 K" in r.json()["detail"]
+        detail = r.json()["detail"]
+        assert "350 K" in detail and "lamps off" in detail and "t = " in detail, detail
         assert c.get("/api/runs").json() == []

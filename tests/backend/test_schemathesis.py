@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from backend.app import create_app
 from backend.settings import Settings
 from backend.threaded_server import ThreadedServer, free_port
-from conftest import fake_factory
+from conftest import FakeStudyRunner, fake_factory
 
 EXAMPLES = 6
 
@@ -23,7 +23,8 @@ def test_openapi_no_server_errors(tmp_path, small_cfg) -> None:
     s = Settings(data_dir=tmp_path / "data", max_duration_s=5.0, max_speed=50.0, max_concurrent_runs=2,
                  change_timeout_s=2.0)
     seen: list[tuple[str, int]] = []
-    with ThreadedServer(create_app(s, small_cfg, loop_factory=fake_factory()), free_port()) as srv:
+    app = create_app(s, small_cfg, loop_factory=fake_factory(), study_runner=FakeStudyRunner())
+    with ThreadedServer(app, free_port()) as srv:
         schema = schemathesis.openapi.from_url(f"{srv.url}/openapi.json")
         labels = []
         for result in schema.get_all_operations():
@@ -43,6 +44,7 @@ def test_openapi_no_server_errors(tmp_path, small_cfg) -> None:
     for label in ("GET /api/health", "POST /api/runs", "GET /api/runs", "GET /api/runs/{run_id}",
                   "POST /api/runs/{run_id}/stop", "PUT /api/runs/{run_id}/reference",
                   "PUT /api/runs/{run_id}/oscillation", "GET /api/runs/{run_id}/metrics",
-                  "GET /api/runs/{run_id}/recording", "GET /api/runs/{run_id}/timeseries"):
+                  "GET /api/runs/{run_id}/recording", "GET /api/runs/{run_id}/timeseries",
+                  "POST /api/studies", "GET /api/studies", "GET /api/studies/{study_id}"):
         assert label in labels, label
         assert any(lbl == label for lbl, _ in seen), label

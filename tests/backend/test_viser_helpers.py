@@ -51,3 +51,31 @@ def test_lamp_colours_follow_their_group(small_cfg) -> None:
         np.testing.assert_allclose(rgb[k], np.floor(LAMP_OFF + frac * (LAMP_ON - LAMP_OFF)), atol=1.0)
     ungrouped = np.where(G.sum(axis=1) == 0)[0]
     assert len(ungrouped) > 0 and all(tuple(rgb[k]) == tuple(LAMP_OFF) for k in ungrouped)
+
+
+def test_scene_runs_like_the_heat_map_and_names_its_parts(small_cfg) -> None:
+    """The camera looks at the +z face with y up, so x (the length) runs left to right as on the dashboard's
+    heat map; the lamp groups, reflectors, holders and window carry labels."""
+    import viser
+
+    from backend.viser import FurnaceScene
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        scene = FurnaceScene(server, small_cfg)
+        cam = server.initial_camera
+        eye, target, up = np.asarray(cam.position), np.asarray(cam.look_at), np.asarray(cam.up)
+        forward = (target - eye) / np.linalg.norm(target - eye)
+        right = np.cross(forward, up)
+        right /= np.linalg.norm(right)
+        screen_up = np.cross(right, forward)
+        assert right @ np.array([1.0, 0.0, 0.0]) > 0.99  # +x to the right on screen
+        assert screen_up @ np.array([0.0, 1.0, 0.0]) > 0.7  # +y up on screen (seen a little from below)
+        labels = {h.text for h in scene.labels.values()}
+        for g in small_cfg.lamps.groups:
+            assert g.name in labels, g.name
+        for part in ("gold reflector (horizontal lamps)", "gold reflector (vertical lamps)", "upper holder (x = 0)",
+                     "lower holder", "quartz window"):
+            assert part in labels, part
+    finally:
+        server.stop()

@@ -14,6 +14,11 @@ from backend.viser import AUTO, colour_range, stored_snapshot, turbo_rgb, vertex
 from conftest import fake_factory, wait_status
 
 
+def _live_controls(view) -> list[bool]:
+    g = view.gui
+    return [not h.disabled for h in (g.new_setpoint, g.new_t_E, g.change_reference, g.toggle_oscillation, g.stop)]
+
+
 def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
     s = Settings(data_dir=tmp_path / "data", viser_port=free_port())
     app = create_app(s, small_cfg, loop_factory=fake_factory(), viser=True)
@@ -35,7 +40,7 @@ def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
 
         view.update()  # nothing picked: the newest running run
         assert f"run `{live}`" in view.gui.status.content and "running" in view.gui.status.content
-        assert view._followed() == live
+        assert view._followed() == live and all(_live_controls(view))
 
         view.pick(done)
         assert view.gui.run.value.startswith(done) and view.follow == done
@@ -47,8 +52,9 @@ def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
         assert "t = 3.0 s (last sample)" in view.gui.status.content
         expected = turbo_rgb(vertex_values(last.field_hat), *colour_range(last.field_hat))
         np.testing.assert_array_equal(view.scene.plate_rgb, expected)  # the finished run's last field is drawn
-        # the live controls never reach the other (running) run while a finished one is shown
+        # the live controls never reach the other (running) run while a finished one is shown: disabled
         assert view._followed() is None and done in view._not_running()
+        assert not any(_live_controls(view))
 
         view.pick(None)  # back to following the running run
         assert view.gui.run.value == AUTO
@@ -58,3 +64,4 @@ def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
         wait_status(c, live, {"stopped"})
         view.update()  # the followed run ended: its last sample, from its file
         assert f"run `{live}`" in view.gui.status.content and "stopped" in view.gui.status.content
+        assert not any(_live_controls(view))  # no running run left to act on

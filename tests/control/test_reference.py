@@ -185,8 +185,9 @@ def _monotone_points(draw):
     steps = draw(st.lists(st.floats(0.0, 300.0), min_size=n, max_size=n))
     sign = draw(st.sampled_from([1.0, -1.0]))
     T_initial = draw(st.floats(260.0, 1290.0))
-    # within the scenario's admissible 250..1300 K (clipping keeps the data monotone)
-    temps = np.clip(T_initial + sign * np.cumsum(steps), 260.0, 1290.0).tolist()
+    # within the scenario's admissible 300..1300 K, T_0 to the top of the material tables (clipping keeps the
+    # data monotone)
+    temps = np.clip(T_initial + sign * np.cumsum(steps), 300.0, 1290.0).tolist()
     return list(zip(times, temps, strict=True)), T_initial, draw(st.floats(0.0, 100.0))
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from twin.config import small_config
+from twin.furnace.simulated.truth import precompute_truth, truth_radiation_config
 from twin.radiation import radiation_model
 from twin.radiation.cache import cache_path, load_or_compute, precompute_command, precompute_seconds
 from twin.radiation.exchange import eta_nodes, exchange_factor_table
@@ -91,6 +92,13 @@ def test_precompute_entry_points(tiny, tmp_path, monkeypatch, caplog):
     seconds = precompute_seconds(tiny)
     assert seconds > 0
     assert list(tmp_path.glob("*.npz")) == [cache_path(tiny)]  # the bench leaves no file behind
+    # the CLI's second table: the simulated furnace's own, a symmetric trace cached beside the model's
+    few = tiny.with_overrides({"truth.radiation.rays_per_specimen_cell": 40, "truth.radiation.rays_per_lamp": 600,
+                               "truth.radiation.rays_per_wall": 600})
+    precompute_truth(few)
+    own = truth_radiation_config(few)
+    assert sorted(tmp_path.glob("*.npz")) == sorted([cache_path(tiny), cache_path(own, symmetric=True)])
+    assert precompute_seconds(own, symmetric=True) > 0
 
 
 def test_fixed_specimen_and_single_housing_section(tiny, tmp_path):

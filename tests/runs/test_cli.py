@@ -59,3 +59,16 @@ def test_run_and_simulate_check_the_scenario_against_the_furnace(tmp_path, capsy
     cfg = load_config(low)
     left_out = load_scenario(None, scenario_limits(cfg, furnace_name(cfg, low)), oscillate=True)
     assert left_out.oscillation.enabled and left_out.oscillation.amplitude == 0.03
+
+
+def test_campaign_options(capsys):
+    p = build_parser()
+    a = p.parse_args(["campaign", "--config", "banded", "--seeds", "3", "--truth", "shared"])
+    assert (a.config, a.seeds, a.truth) == ("banded", 3, "shared")  # --config also after the command
+    a = p.parse_args(["--config", "banded", "campaign"])
+    assert (a.config, a.seeds, a.truth) == ("banded", 5, "independent")  # product.md: 5 seeds, honest truth
+    assert p.parse_args(["campaign"]).config is None
+    assert main(["campaign", "--seeds", "0"]) == 2
+    assert "--seeds must be >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        p.parse_args(["campaign", "--truth", "model"])

@@ -173,3 +173,31 @@ def test_metrics_are_relative_to_the_setpoint(seed, factor) -> None:
     again = compute_metrics(scaled)
     for k, v in base.items():
         assert again[k] == pytest.approx(v, rel=1e-9), k
+
+
+def test_a_reference_change_moves_the_windows_and_the_scale():
+    """After a reference change at t_c the windows are t_c..t_c+t_E (transient) and t_c+1.5..2 t_E (steady)
+    of the new reference, and errors are relative to its setpoint (module docstring of twin.runs.metrics)."""
+    from twin.runs.record import RunChange, change_arrays
+
+    ts = _series(n_t=401, t_E=10.0)  # 0..20 s at 0.05 s
+    t = ts["t"]
+    # a change at t = 4 s to 1000 K in 6 s: transient 4..10 s, steady 13..16 s
+    ts.update(change_arrays([RunChange(4.0, "oscillation", {"enabled": True}),
+                             RunChange(4.0, "reference", {"setpoint": 1000.0, "t_E": 6.0})]))
+    # +20 K in 13..16 s only (the new steady window), +50 K in 16.5..20 s (the scenario's steady window)
+    ts["T_mean_hat"] = ts["T_ref"] + np.where((t >= 13.0) & (t <= 16.0), 20.0, 0.0) + np.where(t >= 16.5, 50.0, 0.0)
+    m = compute_metrics(ts)
+    assert m["mean_error_steady_max"] == pytest.approx(20.0 / 1000.0)  # new window, new scale
+    assert m["mean_error_transient_max"] == pytest.approx(0.0)
+    # without the change the scenario's windows (15..20 s) and setpoint (1100 K) apply
+    for k in ("change_t", "change_kind", "change_json"):
+        del ts[k]
+    assert compute_metrics(ts)["mean_error_steady_max"] == pytest.approx(50.0 / 1100.0)
+
+
+def test_points_reference_change_takes_its_last_point():
+    from twin.runs.metrics import windows_from
+
+    w = windows_from(120.0, 1100.0, [(50.0, "reference", {"points": [[10.0, 900.0], [40.0, 950.0]]})])
+    assert (w.t0, w.t_E, w.setpoint, w.steady) == (50.0, 40.0, 950.0, (110.0, 130.0))

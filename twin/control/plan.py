@@ -26,6 +26,32 @@ from twin.model.dynamics import DiscreteDynamics
 Array = NDArray[np.float64]
 
 
+#: IPOPT's return statuses in words (what a run's events say about a re-plan)
+_STATUS_WORDS = {
+    "Solve_Succeeded": "solved",
+    "Solved_To_Acceptable_Level": "solved to a looser tolerance",
+    "Maximum_Iterations_Exceeded": "stopped at the iteration limit, the best plan found is used",
+    "Maximum_CpuTime_Exceeded": "stopped at the time limit, the best plan found is used",
+    "Maximum_WallTime_Exceeded": "stopped at the time limit, the best plan found is used",
+    "Infeasible_Problem_Detected": "no plan meets the constraints, the closest one is used",
+    "Restoration_Failed": "the solver got stuck, the best plan found is used",
+    "Error_In_Step_Computation": "the solver got stuck, the best plan found is used",
+    "Search_Direction_Becomes_Too_Small": "solved (no further progress possible)",
+}
+
+
+def plain_status(status: str) -> str:
+    """A plan's status in words for the run's events: IPOPT's return status translated, another source
+    of a plan (e.g. ``"test"``) as it is.
+
+    >>> plain_status("Solve_Succeeded"), plain_status("Maximum_Iterations_Exceeded")[:30]
+    ('solved', 'stopped at the iteration limit')
+    """
+    if status in _STATUS_WORDS:
+        return _STATUS_WORDS[status]
+    return status.replace("_", " ").lower() if "_" in status else status
+
+
 class FeedforwardError(RuntimeError):
     """IPOPT did not solve the feedforward OCP; ``status`` holds its return status."""
 

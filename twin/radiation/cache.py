@@ -3,7 +3,9 @@
 One ``.npz`` per configuration digest under ``$FURNACE_TWIN_CACHE`` or
 ``~/.cache/furnace-twin``.  The digest covers every config section F^s or P depends
 on (geometry, optics, positions, ray counts and seed) plus :data:`FORMAT_VERSION`
-(bumped whenever the tracer changes its results).  Files are written atomically
+(bumped whenever the tracer changes its results).  Tables of the symmetric trace
+(:mod:`twin.radiation.symmetry`, the simulated furnace's own) are separate files,
+``exchange-sym-<digest>-v<SYMMETRIC_FORMAT_VERSION>.npz``.  Files are written atomically
 (temporary file + ``os.replace``) and computation holds an exclusive lock file, so
 two processes asking for the same table compute it once.
 
@@ -26,6 +28,7 @@ from numpy.typing import NDArray
 from twin.config import FurnaceConfig
 from twin.radiation.exchange import eta_nodes, exchange_factor_table
 from twin.radiation.model import SurfaceOptics, build_matrices, surface_optics
+from twin.radiation.symmetry import symmetric_exchange_table
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -33,6 +36,8 @@ Array = NDArray[np.float64]
 CACHE_ENV = "FURNACE_TWIN_CACHE"
 #: bump when the geometry or the tracer changes what a given config produces
 FORMAT_VERSION = 5
+#: the same for the symmetric trace (twin/radiation/symmetry.py)
+SYMMETRIC_FORMAT_VERSION = 1
 #: config sections that F^s and P1, P2 depend on
 DEPENDS_ON = ("specimen", "lamps", "reflector", "housing", "holders", "oscillation", "radiation")
 
@@ -54,9 +59,12 @@ def default_cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "furnace-twin"
 
 
-def cache_path(cfg: FurnaceConfig, cache_dir: str | Path | None = None) -> Path:
-    """File of the table of ``cfg``: ``exchange-<digest>-v<FORMAT_VERSION>.npz``."""
+def cache_path(cfg: FurnaceConfig, cache_dir: str | Path | None = None, *, symmetric: bool = False) -> Path:
+    """File of the table of ``cfg``: ``exchange-<digest>-v<FORMAT_VERSION>.npz`` (``exchange-sym-...`` for the
+    symmetric trace)."""
     d = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    if symmetric:
+        return d / f"exchange-sym-{cfg.digest(*DEPENDS_ON)}-v{SYMMETRIC_FORMAT_VERSION}.npz"
     return d / f"exchange-{cfg.digest(*DEPENDS_ON)}-v{FORMAT_VERSION}.npz"
 
 
@@ -78,8 +86,10 @@ def _save(path: Path, table: ExchangeTable) -> None:
         raise
 
 
-def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | None = None) -> ExchangeTable:
-    """Ray-trace F^s at every position and build P1, P2 (no cache involved)."""
+def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | None = None,
+                  symmetric: bool = False) -> ExchangeTable:
+    """Ray-trace F^s at every position (plainly, or with the furnace's mirror symmetries) and build P1, P2
+    (no cache involved)."""
     optics = surface_optics(cfg)
     n = len(eta_nodes(cfg))
     bar = None
@@ -88,7 +98,8 @@ def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | 
 
         bar = tqdm(total=n, desc="exchange factors", unit="position")
     try:
-        eta, F = exchange_factor_table(cfg, workers=workers, on_position=bar.update if bar else None)
+        trace = symmetric_exchange_table if symmetric else exchange_factor_table
+        eta, F = trace(cfg, workers=workers, on_position=bar.update if bar else None)
     finally:
         if bar is not None:
             bar.close()
@@ -98,10 +109,11 @@ def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | 
 
 
 def load_or_compute(
-    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, force: bool = False
+    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, force: bool = False,
+    symmetric: bool = False,
 ) -> ExchangeTable:
     """The table of ``cfg`` from the cache, computing and storing it if missing (or ``force``)."""
-    path = cache_path(cfg, cache_dir)
+    path = cache_path(cfg, cache_dir, symmetric=symmetric)
     optics = surface_optics(cfg)
     if path.exists() and not force:
         try:
@@ -116,30 +128,35 @@ def load_or_compute(
             return _load(path, optics)
         t0 = time.perf_counter()
         log.info("ray-tracing exchange factors for %d positions into %s", len(eta_nodes(cfg)), path)
-        table = compute_table(cfg, progress=progress)
+        table = compute_table(cfg, progress=progress, symmetric=symmetric)
         _save(path, table)
         log.info("exchange factors computed in %.1f s", time.perf_counter() - t0)
         return table
 
 
-def precompute_seconds(cfg: FurnaceConfig) -> float:
+def precompute_seconds(cfg: FurnaceConfig, *, symmetric: bool = False) -> float:
     """Wall time (s) of a cold computation of the whole table into a temporary cache dir (for the bench)."""
     with tempfile.TemporaryDirectory(prefix="furnace-twin-bench-") as d:
         t0 = time.perf_counter()
-        load_or_compute(cfg, cache_dir=d)
+        load_or_compute(cfg, cache_dir=d, symmetric=symmetric)
         return time.perf_counter() - t0
 
 
-def precompute_command(cfg: FurnaceConfig, force: bool) -> int:
-    """``furnace-twin precompute``: fill the cache for ``cfg`` (progress bar), log where and how long."""
-    path = cache_path(cfg)
+def precompute_table(cfg: FurnaceConfig, force: bool, *, symmetric: bool = False) -> None:
+    """Fill the cache with one table of ``cfg`` (progress bar), log where and how long."""
+    path = cache_path(cfg, symmetric=symmetric)
     if path.exists() and not force:
         t0 = time.perf_counter()
-        load_or_compute(cfg)
+        load_or_compute(cfg, symmetric=symmetric)
         log.info("radiation cache is up to date: %s (loaded in %.2f s)", path, time.perf_counter() - t0)
-        return 0
+        return
     t0 = time.perf_counter()
-    load_or_compute(cfg, progress=True, force=force)
+    load_or_compute(cfg, progress=True, force=force, symmetric=symmetric)
     log.info("radiation cache written: %s (%.1f s, %.1f MB)", path, time.perf_counter() - t0,
              path.stat().st_size / 1e6)
+
+
+def precompute_command(cfg: FurnaceConfig, force: bool) -> int:
+    """``furnace-twin precompute`` for the model's table of ``cfg`` (the CLI adds the simulated furnace's)."""
+    precompute_table(cfg, force)
     return 0

@@ -14,14 +14,15 @@ import multiprocessing
 import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
 from twin.physics.geometry import FurnaceGeometry, furnace_geometry
-from twin.radiation.raytrace import trace_exchange_factors
-from twin.radiation.reciprocity import enforce_reciprocity_closure
+from twin.radiation.raytrace import TraceStats, trace_exchange_factors
+from twin.radiation.reciprocity import FixUp, enforce_reciprocity_closure
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -64,15 +65,19 @@ def _trace_position(cfg: FurnaceConfig, eta: float, seed: np.random.SeedSequence
         rng=np.random.default_rng(seed),
     )
     G, fix = enforce_reciprocity_closure(F, geo.area, geo.specular_reflectivity, rays=rays)
-    msg = (
+    return G, trace_message(eta, stats, fix), stats.escaped_fraction > ESCAPE_WARNING
+
+
+def trace_message(eta: float, stats: TraceStats, fix: FixUp) -> str:
+    """One log line on a traced position: rays, losses, and how far the fix-up moved the estimate."""
+    # float32 hit points within ~1e-7 m of a chamber corner can put a reflected ray's origin
+    # outside the box: ~1e-7 of the weight is expected; more means an open enclosure (ESCAPE_WARNING)
+    return (
         f"eta={eta:+.4f} m: {stats.rays} rays, {stats.segments} segments, escaped {stats.escaped_fraction:.2e}, "
         f"truncated {stats.truncated_fraction:.2e}; fix-up: closure defect {fix.closure_defect_before:.2e} -> "
         f"{fix.closure_defect_after:.1e}, exchange moved {fix.moved_fraction:.2%}, "
         f"max relative change of an entry >= 1e-3 of its row {fix.max_relative_change:.2f} ({fix.rounds} rounds)"
     )
-    # float32 hit points within ~1e-7 m of a chamber corner can put a reflected ray's origin
-    # outside the box: ~1e-7 of the weight is expected; more means an open enclosure
-    return G, msg, stats.escaped_fraction > ESCAPE_WARNING
 
 
 def _report(msg: str, escaped: bool) -> None:
@@ -113,6 +118,42 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
+def run_positions(
+    worker: Callable[[Any], tuple[Array, str, bool]],
+    jobs: list[Any],
+    *,
+    workers: int | None = None,
+    on_position: Callable[[], None] | None = None,
+) -> list[Array]:
+    """``worker(job)`` for every job (one eta position each), in up to :data:`MAX_WORKERS` processes.
+
+    ``worker`` returns (F, log message, escaped); results come back in the order of ``jobs``.
+    """
+    n_workers = workers if workers is not None else min(MAX_WORKERS, len(jobs), os.cpu_count() or 1)
+    out: list[Array] = []
+    if n_workers <= 1:
+        for job in jobs:
+            F, msg, escaped = worker(job)
+            _report(msg, escaped)
+            out.append(F)
+            if on_position:
+                on_position()
+        return out
+    # fork: the children must not re-import ``__main__`` (spawn would, and a script that
+    # builds the radiation model at import would then wait on its own cache lock);
+    # they only run numpy/Embree and never log.
+    ctx = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(),)
+    ) as pool:
+        for F, msg, escaped in pool.map(worker, jobs):
+            _report(msg, escaped)
+            out.append(F)
+            if on_position:
+                on_position()
+    return out
+
+
 def exchange_factor_table(
     cfg: FurnaceConfig, *, workers: int | None = None, on_position: Callable[[], None] | None = None
 ) -> tuple[Array, Array]:
@@ -126,24 +167,4 @@ def exchange_factor_table(
     etas = eta_nodes(cfg)
     seeds = np.random.SeedSequence(cfg.radiation.seed).spawn(len(etas))
     jobs = [(cfg, float(e), s) for e, s in zip(etas, seeds, strict=True)]
-    n_workers = workers if workers is not None else min(MAX_WORKERS, len(etas), os.cpu_count() or 1)
-    out: list[Array] = []
-    if n_workers <= 1:
-        for job in jobs:
-            out.append(exchange_factors_at(*job))
-            if on_position:
-                on_position()
-    else:
-        # fork: the children must not re-import ``__main__`` (spawn would, and a script that
-        # builds the radiation model at import would then wait on its own cache lock);
-        # they only run numpy/Embree and never log.
-        ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(),)
-        ) as pool:
-            for F, msg, escaped in pool.map(_worker, jobs):
-                _report(msg, escaped)
-                out.append(F)
-                if on_position:
-                    on_position()
-    return etas, np.stack(out)
+    return etas, np.stack(run_positions(_worker, jobs, workers=workers, on_position=on_position))

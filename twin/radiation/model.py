@@ -156,7 +156,7 @@ def lamp_flux_max(cfg: FurnaceConfig) -> Array:
 
 
 def radiation_model(
-    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False
+    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, symmetric: bool = False
 ) -> RadiationModel:
     """Radiation model of ``cfg``: cached F^s (or ray-traced now) and the matrices of eqs. (4)-(5).
 
@@ -165,10 +165,11 @@ def radiation_model(
     cfg : furnace configuration
     cache_dir : directory of the F^s cache (default ``$FURNACE_TWIN_CACHE`` or ``~/.cache/furnace-twin``)
     progress : show a tqdm progress bar while ray tracing
+    symmetric : trace with the chamber's mirror symmetries (:mod:`twin.radiation.symmetry`), cached apart
     """
     from twin.radiation.cache import load_or_compute
 
-    table = load_or_compute(cfg, cache_dir=cache_dir, progress=progress)
+    table = load_or_compute(cfg, cache_dir=cache_dir, progress=progress, symmetric=symmetric)
     geo = furnace_geometry(cfg, 0.0)
     return RadiationModel(
         eta_nodes=table.eta,

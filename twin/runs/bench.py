@@ -3,6 +3,7 @@
 | key | meaning |
 |---|---|
 | precompute_s | exchange factors for all eta positions, cold cache |
+| truth_precompute_s | the same for the simulated furnace's own table (symmetric trace of [truth.radiation]) |
 | plant_rtf | simulated s per wall s, full-order plant with oscillation, open loop |
 | closed_loop_rtf | the same for plant + EKF + LQG over a whole run (feedforward solved), default estimator |
 | step_ms | EKF update + controller per sample, median, default estimator |
@@ -95,12 +96,15 @@ def plant_rtf(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> fl
 def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True) -> dict[str, float]:
     from twin.control.feedforward import ocp_seconds
     from twin.control.replan import replan_seconds
+    from twin.furnace.simulated.truth import truth_radiation_config
     from twin.radiation import radiation_model
     from twin.radiation.cache import precompute_seconds
 
     out: dict[str, float] = {}
     log.info("bench: precompute (cold cache)")
     out["precompute_s"] = precompute_seconds(cfg)
+    log.info("bench: the truth's precompute (cold cache)")
+    out["truth_precompute_s"] = precompute_seconds(truth_radiation_config(cfg), symmetric=True)
     rad = radiation_model(cfg)
     log.info("bench: plant")
     out["plant_rtf"] = plant_rtf(cfg, rad)

@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
+from twin.control.plan import plain_status
 from twin.furnace.interface import Furnace, Readings
 from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
@@ -60,7 +61,7 @@ from twin.runs.estimators import RunEstimators
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -217,7 +218,7 @@ class ClosedLoop:
             T_now = float(self._ctl.model.c_m @ self.estimator.state.theta)
             ref_fn = self._make_reference(spec, T_now, t_start=t_now)
             self._wanted_reference = (spec, ref_fn)
-            return self._request("reference", f"reference change requested at t = {t_now:.1f} s")
+            return self._request("reference", f"reference change requested at t = {t_now:.1f} s: {describe(spec)}")
 
     def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
         """Switch the specimen motion; the motion, model, plan and gains switch together once re-planned.
@@ -254,13 +255,17 @@ class ClosedLoop:
                 self._reference_spec = wanted_ref[0]
                 self._set_ref_fn(ref)
                 self._wanted_reference = None
+                self.record.note_change(t, "reference", wanted_ref[0].model_dump_json())  # the metric windows
             if spec is self._wanted_oscillation:
                 self._wanted_oscillation = None
             if spec != self._oscillation:
                 self._oscillation = spec
                 self.furnace.set_oscillation(spec, t)
-            said = {"reference": f"reference changed at t = {t:.1f} s",
-                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s",
+                self.record.note_change(t, "oscillation", spec.model_dump_json())
+            ref_words = f" to {describe(self._reference_spec)}" if "reference" in kinds else ""
+            how = f" ({describe(spec).removeprefix('on (')}" if spec.enabled else ""  # " (48 mm, 18 s)"
+            said = {"reference": f"reference changed at t = {t:.1f} s{ref_words}",
+                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}",
                     "calibration": f"calibration at t = {t:.1f} s"}
             self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
             return t
@@ -281,7 +286,7 @@ class ClosedLoop:
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         if motion_changed:  # the averaged estimators switch to the new period average with the controller
             self.estimators.switch_motion(ctl.oscillation if ctl.oscillation.enabled else None)
-        self._events.append(f"re-planned ({description}): {ctl.plan.status}")
+        self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}")
 
     # ------------------------------------------------------------------ the loop
     @property

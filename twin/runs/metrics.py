@@ -1,8 +1,17 @@
 """Run metrics (product.md) as pure functions of a run's time series.
 
 All relative errors are divided by the setpoint T_ref(t_E).  Windows: transient
-0 <= t <= t_E, steady 1.5 t_E <= t <= 2 t_E.  The inhomogeneity is the paper's
-sup-norm (section 5.1)
+0 <= t <= t_E, steady 1.5 t_E <= t <= 2 t_E.
+
+**A reference changed during the run** moves the windows: they count from the last reference
+change (the first sample that used it, ``change_t`` in the time series), with that reference's
+t_E (a points reference: the time of its last point) and setpoint (its last temperature), which
+also divides the relative errors: transient t_c <= t <= t_c + t_E, steady
+t_c + 1.5 t_E <= t <= t_c + 2 t_E (:func:`windows_of`).  Without a change t_c = 0 and the
+scenario's t_E and setpoint apply, as in the paper.  ``tc123_error_max`` keeps the whole run
+after the scenario's first t_E / 10.  An oscillation change does not move the windows.
+
+The inhomogeneity is the paper's sup-norm (section 5.1)
 
     T_sup(t) = max over the fillet |T_hat(x, y, t) - T_ref(t)|,
 
@@ -18,11 +27,15 @@ Example
 >>> t = np.linspace(0, 2.0, 21)
 >>> bool(window(t, 1.0, "steady").sum() == 6)
 True
+>>> w = windows_from(120.0, 1100.0, [(100.0, "reference", {"setpoint": 1050.0, "t_E": 30.0})])
+>>> w.transient, w.steady, w.setpoint
+((100.0, 130.0), (145.0, 160.0), 1050.0)
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -30,6 +43,7 @@ from numpy.typing import NDArray
 
 from twin.model.tables import PARAMETERS  # the order of the record's ``parameters``
 from twin.physics.fillet import Fillet
+from twin.runs.record import load_changes
 
 Array = NDArray[np.float64]
 
@@ -71,13 +85,99 @@ def _oscillation_period(ts: Mapping[str, Any]) -> float | None:
     return float(osc["period"]) if osc.get("enabled") and osc.get("period") else None
 
 
-def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"]) -> NDArray[np.bool_]:
-    """Boolean mask of the transient (0..t_E), steady (1.5..2 t_E) or after-start (>= t_E/10) samples."""
+@dataclass(frozen=True)
+class Windows:
+    """The metric windows of a run: from ``t0`` (s, the last reference change, 0 without one) with that
+    reference's ``t_E`` (s) and ``setpoint`` (K, the scale of the relative errors)."""
+
+    t0: float
+    t_E: float
+    setpoint: float
+
+    @property
+    def transient(self) -> tuple[float, float]:
+        return (self.t0, self.t0 + self.t_E)
+
+    @property
+    def steady(self) -> tuple[float, float]:
+        return (self.t0 + 1.5 * self.t_E, self.t0 + 2.0 * self.t_E)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"t0": self.t0, "t_E": self.t_E, "setpoint": self.setpoint,
+                "transient": list(self.transient), "steady": list(self.steady)}
+
+
+def _reference_end(body: Mapping[str, Any]) -> tuple[float, float]:
+    """(t_E, setpoint) of a reference as JSON: a transition's, or a points reference's last point."""
+    if "points" in body:
+        t_last, T_last = body["points"][-1]
+        return float(t_last), float(T_last)
+    return float(body["t_E"]), float(body["setpoint"])
+
+
+def windows_from(t_E: float, setpoint: float, changes: Iterable[tuple[float, str, Mapping[str, Any]]]) -> Windows:
+    """The windows of a run whose scenario has ``t_E`` and ``setpoint``, after its live ``changes``
+    ((t, kind, body) oldest first): the last reference change moves them (module docstring)."""
+    out = Windows(0.0, float(t_E), float(setpoint))
+    for t, kind, body in changes:
+        if kind == "reference":
+            tE, sp = _reference_end(body)
+            out = Windows(float(t), tE, sp)
+    return out
+
+
+def windows_of(ts: Mapping[str, Any]) -> Windows:
+    """The windows of a stored run (the ``timeseries.npz`` layout; ``change_*`` may be absent)."""
+    return windows_from(float(ts["t_E"]), float(ts["setpoint"]),
+                        ((c.t, c.kind, c.body) for c in load_changes(ts)))
+
+#: each metric in words: (short name, what it measures); the dashboard, the report and the comparison
+#: show these.  Values are relative to the setpoint of the windows (x 100 = %; x setpoint = K).
+METRIC_WORDS: dict[str, tuple[str, str]] = {
+    "mean_error_transient_max": (
+        "Mean error, transient (max)",
+        "largest |fillet mean of the estimate - reference| in the transient window"),
+    "mean_error_steady_max": (
+        "Mean error, steady (max)",
+        "largest |fillet mean of the estimate - reference| in the steady window"),
+    "tc123_error_max": (
+        "TC1-3 error (max)",
+        "largest |reading - estimate| at TC1, TC2, TC3 (the thermocouples the estimator uses), "
+        "after the first tenth of t_E"),
+    "tc4_error_transient_max": (
+        "TC4 error, transient (max)",
+        "largest |reading - estimate| at TC4, the validation thermocouple the estimator never sees, "
+        "in the transient window"),
+    "tc4_error_steady_max": (
+        "TC4 error, steady (max)",
+        "largest |reading - estimate| at TC4 (validation) in the steady window"),
+    "inhomogeneity_transient_max": (
+        "T_sup, transient (max)",
+        "largest T_sup = max over the fillet |estimate - reference| (paper, section 5.1) in the transient window"),
+    "inhomogeneity_steady": (
+        "T_sup, steady (mean)",
+        "mean of T_sup = max over the fillet |estimate - reference| over the steady window"),
+    "true_inhomogeneity_steady": (
+        "True T_sup, steady (mean)",
+        "the same from the simulated furnace's true field (simulations only)"),
+    "true_mean_error_steady_max": (
+        "True mean error, steady (max)",
+        "largest |true fillet mean - reference| in the steady window (simulations only)"),
+    "field_estimation_error_steady_max": (
+        "Field estimation error, steady (max)",
+        "largest |estimate - true field| over the fillet in the steady window (simulations only)"),
+}
+
+
+def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"],
+           t0: float = 0.0) -> NDArray[np.bool_]:
+    """Boolean mask of the transient (t0..t0+t_E), steady (t0+1.5..t0+2 t_E) or after-start
+    (>= t_E/10 from the run's start) samples."""
     eps = 1e-9 * max(t_E, 1.0)
     if which == "transient":
-        return (t >= -eps) & (t <= t_E + eps)
+        return (t >= t0 - eps) & (t <= t0 + t_E + eps)
     if which == "steady":
-        return (t >= 1.5 * t_E - eps) & (t <= 2.0 * t_E + eps)
+        return (t >= t0 + 1.5 * t_E - eps) & (t <= t0 + 2.0 * t_E + eps)
     return t >= t_E / 10 - eps
 
 
@@ -97,19 +197,21 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     """The product.md metrics from a time-series mapping (the ``timeseries.npz`` layout).
 
     Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, x, y, L_s, W_s,
-    t_E, setpoint`` and, for the ``true_*`` metrics, ``field_true``.  Windows without samples give
-    NaN (a run stopped early).  Oscillating, calibrating and shadowed runs get more keys (:func:`_extras`).
+    t_E, setpoint`` and, for the ``true_*`` metrics, ``field_true``; the ``change_*`` of live changes
+    move the windows (:func:`windows_of`).  Windows without samples give NaN (a run stopped early).
+    Oscillating, calibrating and shadowed runs get more keys (:func:`_extras`).
     """
     t = np.asarray(ts["t"], float)
-    t_E = float(ts["t_E"])
-    scale = float(ts["setpoint"])
+    t_E0 = float(ts["t_E"])  # the scenario's: tc123_error_max counts from its first tenth
+    w = windows_of(ts)
+    t0, t_E, scale = w.t0, w.t_E, w.setpoint
     T_ref = np.asarray(ts["T_ref"], float)
     tc = np.asarray(ts["tc"], float)
     tc_hat = np.asarray(ts["tc_hat"], float)
     mean_err = np.abs(np.asarray(ts["T_mean_hat"], float) - T_ref) / scale
     tc_err = np.abs(tc - tc_hat) / scale
 
-    tr, st, after = window(t, t_E, "transient"), window(t, t_E, "steady"), window(t, t_E, "after_start")
+    tr, st, after = window(t, t_E, "transient", t0), window(t, t_E, "steady", t0), window(t, t_E0, "after_start")
 
     tf = np.asarray(ts["t_field"], float)
     fillet = Fillet.on_grid(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
@@ -123,7 +225,7 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
         est_err = np.max(np.abs(f_hat - f_true)[..., fillet.mask], axis=-1) / scale
     else:  # no truth (a real furnace), or no samples
         sup_true = true_mean_err = est_err = np.full(tf.size, np.nan)
-    trf, stf = window(tf, t_E, "transient"), window(tf, t_E, "steady")
+    trf, stf = window(tf, t_E, "transient", t0), window(tf, t_E, "steady", t0)
     out: dict[str, Any] = {
         "mean_error_transient_max": _max(mean_err, tr),
         "mean_error_steady_max": _max(mean_err, st),

@@ -1,4 +1,7 @@
-"""``furnace-twin simulate``: an open-loop run of the plant with constant or scheduled group powers.
+"""``furnace-twin simulate``: an open-loop run of the simulated furnace with constant or scheduled group powers.
+
+The furnace is the scenario's (``--truth independent``, the default: its own tables, latent heat, lagging
+and biased TCs, lagging lamps; ``--truth shared``: the model's plant with ideal sensors).
 
 Writes ``timeseries.npz`` (t, eta, u (n, 6), tc (n, 4), tc_true, fillet_mean,
 inhomogeneity, t_field, field (m, N_y, N_x), x, y, L_s, W_s, tc_positions, group_names)
@@ -29,7 +32,7 @@ from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
 from twin.limits import furnace_name, scenario_limits
-from twin.scenario import MAX_DURATION_S, OscillationSpec, parse_oscillation
+from twin.scenario import MAX_DURATION_S, OscillationSpec, parse_oscillation, parse_scenario
 
 log = logging.getLogger(__name__)
 
@@ -103,40 +106,38 @@ class OpenLoopRun:
 
 
 def run_open_loop(
-    plant: Any,
+    furnace: Any,
     u_of_t: Callable[[float], Array],
-    eta_of_t: Callable[[float], float],
     duration: float,
-    thermocouples: Any,
-    rng: np.random.Generator,
-    noise: float,
     field_every: float = 1.0,
 ) -> OpenLoopRun:
-    """March the plant from its initial temperature, reading the TCs at every sample t_s."""
-    cfg = plant.cfg
-    dt = cfg.sampling.t_s
+    """March a simulated furnace (:class:`twin.furnace.simulated.SimulatedFurnace`) from its initial state,
+    reading its TCs at every sample t_s; ``tc_true`` is the plate under each TC, ``tc`` what the TC reads
+    (lag, bias and noise of the furnace's truth)."""
+    plant, dt = furnace.plant, furnace.t_s
     n = int(round(duration / dt))
     every = max(1, int(round(field_every / dt)))
-    state = plant.start(np.full(plant.n, cfg.specimen.initial_temperature), 0.0)
     t = np.arange(n + 1) * dt
-    eta = np.array([eta_of_t(v) for v in t])
+    eta = np.empty(n + 1)
     u = np.empty((n + 1, plant.n_groups))
-    tc_true = np.empty((n + 1, thermocouples.H.shape[0]))
+    tc = np.empty((n + 1, len(furnace.tc_positions)))
+    tc_true = np.empty_like(tc)
     means = np.empty(n + 1)
     inh = np.empty(n + 1)
     t_field, fields = [], []
     for j in range(n + 1):
-        T = state.T
+        T = furnace.true_field()
+        eta[j] = furnace.motion(t[j]).eta
         u[j] = u_of_t(t[j])
-        tc_true[j] = thermocouples.true_values(T)
+        tc[j] = furnace.read(t[j]).values
+        tc_true[j] = furnace.thermocouples.true_values(T)
         means[j] = plant.fillet_mean(T)
         inh[j] = plant.fillet_inhomogeneity(T)
         if j % every == 0 or j == n:
             t_field.append(t[j])
             fields.append(plant.field(T))
         if j < n:
-            state = plant.advance(state, u[j], dt, eta_of_t)
-    tc = tc_true + (noise * rng.standard_normal(tc_true.shape) if noise > 0 else 0.0)
+            furnace.apply(u[j], t[j])
     return OpenLoopRun(t, eta, u, tc, tc_true, means, inh, np.array(t_field), np.array(fields))
 
 
@@ -154,11 +155,20 @@ def _oscillation(cfg: FurnaceConfig, args: Any) -> OscillationSpec:
         raise SimulateArgumentError(msgs) from None
 
 
+def _scenario(cfg: FurnaceConfig, args: Any, spec: OscillationSpec) -> Any:
+    """The furnace's side of a scenario: oscillation, TC4, seed, truth (``--truth``, default independent)."""
+    data = {"oscillation": spec.model_dump(), "tc4": list(args.tc4), "seed": args.seed,
+            "truth": getattr(args, "truth", "independent")}
+    try:
+        return parse_scenario(data, scenario_limits(cfg, furnace_name(cfg, getattr(args, "config", None))))
+    except ValidationError as exc:
+        msgs = "; ".join(f"--{e['loc'][-1]}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors())
+        raise SimulateArgumentError(msgs) from None
+
+
 def simulate_command(cfg: FurnaceConfig, args: Any) -> int:
     """Entry point of ``furnace-twin simulate`` (argument parsing lives in twin.cli)."""
-    from twin.furnace.simulated.plant import Plant
-    from twin.furnace.simulated.thermocouples import Thermocouples
-    from twin.physics.motion import eta_function
+    from twin.furnace.simulated import SimulatedFurnace
     from twin.radiation import radiation_model
     from twin.runs.figures_open_loop import plot_field, plot_tc_traces
 
@@ -168,6 +178,7 @@ def simulate_command(cfg: FurnaceConfig, args: Any) -> int:
             raise SimulateArgumentError(f"--duration: must be in (0, {MAX_DURATION_S:g}] s, got {args.duration}")
         spec = _oscillation(cfg, args)
         sched = load_schedule(args.schedule, cfg.n_groups) if args.schedule else None
+        scenario = _scenario(cfg, args, spec)
     except SimulateArgumentError as exc:
         print(f"furnace-twin simulate: {exc}", file=sys.stderr)  # noqa: T201
         return 2
@@ -180,14 +191,19 @@ def simulate_command(cfg: FurnaceConfig, args: Any) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    truth = scenario.truth
     rad = radiation_model(cfg, progress=True)
-    plant = Plant(cfg, rad)
+    own = None
+    if truth == "independent":
+        from twin.furnace.simulated.truth import truth_radiation
+
+        own = truth_radiation(cfg, progress=True)
+    furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
+    plant = furnace.plant
     positions = cfg.tc_positions(tuple(args.tc4))
-    tcs = Thermocouples(cfg, positions)
-    log.info("simulate: %.0f s open loop, oscillation %s", args.duration, "on" if spec.enabled else "off")
-    run = run_open_loop(
-        plant, u_of_t, eta_function(spec), args.duration, tcs, np.random.default_rng(args.seed), cfg.sensors.noise
-    )
+    log.info("simulate: %.0f s open loop, oscillation %s, truth %s", args.duration,
+             "on" if spec.enabled else "off", truth)
+    run = run_open_loop(furnace, u_of_t, args.duration)
     names = [g.name for g in cfg.lamps.groups]
     s = cfg.specimen
     np.savez_compressed(

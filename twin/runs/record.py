@@ -10,7 +10,11 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
 * with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
   efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
   ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
-* events: ``event_t`` (s) and ``event_text``, the run's own reports (re-plans, switches);
+* events: ``event_t`` (s), ``event_text`` and ``event_level`` (``info``, ``warn`` or ``error``), the
+  run's own reports (re-plans, switches; the server adds its own: start, end, changes, saturation);
+* live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
+  (``reference`` or ``oscillation``) and ``change_json`` (the new reference / oscillation as JSON); the
+  metrics' windows start at the last reference change (:func:`twin.runs.metrics.windows_of`);
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
 
@@ -27,14 +31,18 @@ Example
 ...                     field_true=None, tc=np.zeros(4), tc_hat=np.zeros(4), u=np.zeros(1), u_ff=np.zeros(1),
 ...                     inhomogeneity=1.0, true_mean=None, true_inhomogeneity=None, events=("started",)))
 >>> a = rec.arrays()
+>>> rec.note_change(0.1, "reference", '{"setpoint": 900.0, "t_E": 5.0}')
 >>> len(rec), a["T_mean_hat"].tolist(), "field_true" in a, a["event_text"].tolist()
 (1, [301.0], False, ['started'])
+>>> rec.arrays()["change_kind"].tolist(), load_changes(rec.arrays())[0].body["setpoint"]
+(['reference'], 900.0)
 """
 
 from __future__ import annotations
 
+import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -50,6 +58,60 @@ FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
 #: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
 #: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
 OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
+EVENT_LEVELS = ("info", "warn", "error")
+
+
+@dataclass(frozen=True)
+class RunEvent:
+    """One report of a run: at run time ``t`` (s), a plain sentence, ``info``, ``warn`` or ``error``."""
+
+    t: float
+    text: str
+    level: str = "info"
+
+
+@dataclass(frozen=True)
+class RunChange:
+    """A live change applied during a run: from run time ``t`` (s) on, ``kind`` (``reference`` or
+    ``oscillation``) is ``body`` (the reference / oscillation as a JSON object)."""
+
+    t: float
+    kind: str
+    body: dict[str, Any]
+
+
+def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:
+    """Events as the ``event_t``, ``event_text``, ``event_level`` arrays of the ``timeseries.npz`` layout."""
+    ev = list(events)
+    return {"event_t": np.asarray([e.t for e in ev], float),
+            "event_text": np.asarray([e.text for e in ev], dtype=str),
+            "event_level": np.asarray([e.level for e in ev], dtype=str)}
+
+
+def load_events(arrays: Mapping[str, Any]) -> list[RunEvent]:
+    """The events of a saved run (an older file without ``event_*`` has none; without levels: ``info``)."""
+    if "event_t" not in arrays:
+        return []
+    ts, texts = np.asarray(arrays["event_t"], float), np.asarray(arrays["event_text"]).astype(str)
+    levels = np.asarray(arrays["event_level"]).astype(str) if "event_level" in arrays else ["info"] * len(ts)
+    return [RunEvent(float(t), str(x), str(lv)) for t, x, lv in zip(ts, texts, levels, strict=True)]
+
+
+def change_arrays(changes: Iterable[RunChange]) -> dict[str, Any]:
+    """Live changes as the ``change_t``, ``change_kind``, ``change_json`` arrays of ``timeseries.npz``."""
+    ch = list(changes)
+    return {"change_t": np.asarray([c.t for c in ch], float),
+            "change_kind": np.asarray([c.kind for c in ch], dtype=str),
+            "change_json": np.asarray([json.dumps(c.body, sort_keys=True) for c in ch], dtype=str)}
+
+
+def load_changes(arrays: Mapping[str, Any]) -> list[RunChange]:
+    """The live changes of a saved run, oldest first (none in an older file)."""
+    if "change_t" not in arrays:
+        return []
+    return [RunChange(float(t), str(k), json.loads(str(b))) for t, k, b in
+            zip(np.asarray(arrays["change_t"], float), np.asarray(arrays["change_kind"]).astype(str),
+                np.asarray(arrays["change_json"]).astype(str), strict=True)]
 
 
 @dataclass(frozen=True)
@@ -152,7 +214,8 @@ class RunRecord:
         self.has_truth = has_truth
         self._columns: dict[str, _Column] = {}
         self._optional: tuple[str, ...] = ()
-        self._events: list[tuple[float, str]] = []
+        self._events: list[RunEvent] = []
+        self._changes: list[RunChange] = []
 
     def __len__(self) -> int:
         return self._columns["t"].n if self._columns else 0
@@ -178,7 +241,11 @@ class RunRecord:
                 self._columns[k] = _Column(np.shape(v), dtype)
         for k, v in values.items():
             self._columns[k].append(v)
-        self._events.extend((float(snap.t), str(e)) for e in snap.events)
+        self._events.extend(RunEvent(float(snap.t), str(e)) for e in snap.events)
+
+    def note_change(self, t: float, kind: str, body_json: str) -> None:
+        """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``."""
+        self._changes.append(RunChange(float(t), kind, json.loads(body_json)))
 
     def arrays(self) -> dict[str, Any]:
         """Everything recorded so far, in the ``timeseries.npz`` layout (copies)."""
@@ -197,14 +264,27 @@ class RunRecord:
             if k not in FIELD_SERIES:
                 out[k] = self._columns[k].view().copy()
         out["t_field"] = out["t"].copy()
-        out["event_t"] = np.asarray([t for t, _ in self._events], float)
-        out["event_text"] = np.asarray([e for _, e in self._events], dtype=str)
+        out.update(event_arrays(self._events))
+        out.update(change_arrays(self._changes))
         return out
 
-    def tail(self, start: int) -> dict[str, Any]:
-        """The series of samples ``start``.. (per-sample arrays, ``t_field``, and the events of those samples)
-        without the run's constants: one part of an append-only store (:mod:`twin.runs.series_store`);
-        the parts concatenated after the header give :meth:`arrays`."""
+    def add_event(self, event: RunEvent) -> None:
+        """An event that is not a sample's (the server's: the start, refused changes, saturated groups, the end)."""
+        self._events.append(event)
+
+    @property
+    def n_events(self) -> int:
+        return len(self._events)
+
+    @property
+    def n_changes(self) -> int:
+        return len(self._changes)
+
+    def tail(self, start: int, events_from: int | None = None, changes_from: int = 0) -> dict[str, Any]:
+        """The series of samples ``start``.. (per-sample arrays, ``t_field``), the events from index
+        ``events_from`` on (default: those at or after the first of these samples) and the changes from
+        ``changes_from`` on, without the run's constants: one part of an append-only store
+        (:mod:`twin.runs.series_store`); the parts concatenated after the header give :meth:`arrays`."""
         n_y, n_x = len(self.header.y), len(self.header.x)
         out: dict[str, Any] = {}
         for k, col in self._columns.items():
@@ -216,10 +296,13 @@ class RunRecord:
                 continue
             out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
         out["t_field"] = out["t"].copy()
-        t0 = float(out["t"][0]) if len(out["t"]) else np.inf
-        events = [(t, e) for t, e in self._events if t >= t0]
-        out["event_t"] = np.asarray([t for t, _ in events], float)
-        out["event_text"] = np.asarray([e for _, e in events], dtype=str)
+        if events_from is None:
+            t0 = float(out["t"][0]) if len(out["t"]) else np.inf
+            events = [e for e in self._events if e.t >= t0]
+        else:
+            events = self._events[events_from:]
+        out.update(event_arrays(events))
+        out.update(change_arrays(self._changes[changes_from:]))
         return out
 
     def metrics(self) -> dict[str, Any]:

@@ -62,21 +62,24 @@ class SeriesStore:
     def __init__(self, folder: Path) -> None:
         self.dir = parts_dir(folder)
         self.written = 0  # samples stored so far
+        self.events_written = 0  # events and live changes stored so far
+        self.changes_written = 0
         self.parts = 0
         self.bytes_written = 0
 
     def append(self, record: RunRecord) -> int:
-        """Store the samples added since the last call; returns the bytes written."""
-        n = len(record)
-        if n <= self.written:
+        """Store the samples, events and live changes added since the last call; returns the bytes written."""
+        n, n_events, n_changes = len(record), record.n_events, record.n_changes
+        if n <= self.written and n_events <= self.events_written and n_changes <= self.changes_written:
             return 0
         self.dir.mkdir(parents=True, exist_ok=True)
         before = self.bytes_written
         if self.parts == 0:
             self._save(self.dir / HEADER, record.header.arrays())
         self.parts += 1
-        self._save(self.dir / f"part-{self.parts:06d}.npz", record.tail(self.written))
-        self.written = n
+        self._save(self.dir / f"part-{self.parts:06d}.npz",
+                   record.tail(self.written, self.events_written, self.changes_written))
+        self.written, self.events_written, self.changes_written = n, n_events, n_changes
         return self.bytes_written - before
 
     def _save(self, path: Path, arrays: dict[str, Any]) -> None:

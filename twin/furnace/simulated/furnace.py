@@ -1,11 +1,14 @@
 """The simulated furnace: the full-order plant, its thermocouples and the specimen drive behind the
 furnace boundary (:class:`twin.furnace.interface.Furnace`).
 
-It is the "truth" of a simulated run: the plant (eqs. 1-6) with its own radiation tables and
-deviations from the model (``mismatch``), Gaussian TC noise from the run's seed, and eta(t) of
-the oscillation in force.  Time advances only through :meth:`SimulatedFurnace.apply`: each call
-integrates the plant over one sample with the powers held, so samples are read and applied in
-order (t_j, t_j + t_s, ...).
+It is the "truth" of a simulated run: the plant (eqs. 1-6), Gaussian TC noise from the run's seed,
+and eta(t) of the oscillation in force.  Built for a scenario (:meth:`SimulatedFurnace.for_scenario`)
+it is, by default, not the twin's model: its own exchange factors, latent heat in c_p, lagging and
+biased thermocouples, lagging lamps and deviations of emissivity, convection and lamp efficiency
+(:mod:`twin.furnace.simulated.truth`, the furnace file's ``[truth]``); with ``"truth": "shared"``
+it is the plant on the model's own tables with ideal sensors and lamps.  Time advances only through
+:meth:`SimulatedFurnace.apply`: each call integrates the plant over one sample with the powers held,
+so samples are read and applied in order (t_j, t_j + t_s, ...).
 
 Example
 -------
@@ -32,7 +35,9 @@ from numpy.typing import ArrayLike, NDArray
 from twin.config import FurnaceConfig
 from twin.furnace.interface import Motion, Readings
 from twin.furnace.simulated.plant import Plant
+from twin.furnace.simulated.sensors import LaggedThermocouples, LampLag
 from twin.furnace.simulated.thermocouples import Thermocouples
+from twin.furnace.simulated.truth import Truth, deviations
 from twin.physics.motion import eta_function
 from twin.scenario import Mismatch, OscillationSpec, Scenario
 
@@ -48,12 +53,14 @@ class SimulatedFurnace:
     ----------
     cfg : the furnace
     radiation : the plant's radiation model (``None``: no radiation, for tests)
-    mismatch : the plant's relative deviations from the nominal model
+    mismatch : the plant's relative deviations from the nominal model (all of them: with a ``truth``,
+        :func:`twin.furnace.simulated.truth.deviations` adds the furnace's own to a scenario's)
     tc4 : relative position (x / L_s, y / W_s) of the validation thermocouple TC4
     tc_noise : TC noise standard deviation (K)
     seed : of the TC noise
     oscillation : the drive's settings at t = 0
     T0 : initial cell temperatures (K); default the configured uniform initial temperature
+    truth : the furnace's latent heat, TC and lamp dynamics (``None``: the model's c_p, ideal TCs and lamps)
     """
 
     kind = "simulated"
@@ -69,24 +76,41 @@ class SimulatedFurnace:
         seed: int = 0,
         oscillation: OscillationSpec | None = None,
         T0: ArrayLike | None = None,
+        truth: Truth | None = None,
     ) -> None:
         self.cfg = cfg
-        self.plant = Plant(cfg, radiation, mismatch)
+        self.truth = truth
+        self.plant = Plant(cfg if truth is None else truth.plant_cfg, radiation, mismatch)
         positions: Sequence[tuple[float, float]] = cfg.tc_positions(tc4)
         self.thermocouples = Thermocouples(cfg, positions)
         self._tc_noise = float(tc_noise)
         self._rng = np.random.default_rng(seed)
         T_init = np.full(self.plant.n, cfg.specimen.initial_temperature) if T0 is None else T0
         self._state = self.plant.start(T_init, 0.0)
+        self._sensors: LaggedThermocouples | None = None
+        self._lamps: LampLag | None = None
+        if truth is not None:
+            self._sensors = LaggedThermocouples(self.thermocouples, self._state.T, seed=seed,
+                                                time_constant=truth.tc_time_constant, bias=truth.tc_bias)
+            self._lamps = LampLag(cfg.n_groups, time_constant=truth.lamp_time_constant)
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
 
     @classmethod
-    def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any) -> SimulatedFurnace:
-        """The furnace of a scenario: its mismatch, TC4, TC noise, seed and initial oscillation."""
-        return cls(cfg, radiation, mismatch=scenario.mismatch, tc4=scenario.tc4, tc_noise=scenario.tc_noise,
-                   seed=scenario.seed, oscillation=scenario.oscillation)
+    def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *,
+                     truth_radiation: Any = None) -> SimulatedFurnace:
+        """The furnace of a scenario: its truth, mismatch, TC4, TC noise, seed and initial oscillation.
+
+        ``radiation`` is the twin's model (the plant's tables when the scenario's truth is ``"shared"``);
+        ``truth_radiation`` the furnace's own table, read from the cache if not given and needed.
+        """
+        common: dict[str, Any] = {"tc4": scenario.tc4, "tc_noise": scenario.tc_noise, "seed": scenario.seed,
+                                  "oscillation": scenario.oscillation}
+        if scenario.truth == "shared":
+            return cls(cfg, radiation, mismatch=scenario.mismatch, **common)
+        truth = Truth.of(cfg, truth_radiation)
+        return cls(cfg, truth.radiation, mismatch=deviations(cfg, scenario.mismatch), truth=truth, **common)
 
     # ---- the Furnace protocol
     @property
@@ -107,16 +131,28 @@ class SimulatedFurnace:
             raise ValueError(f"{what} at t = {t:.6g} s, but the simulated furnace is at t = {self._state.t:.6g} s")
 
     def read(self, t: float) -> Readings:
-        """TC1..TC4 at the plant's current time t: bilinear in the field plus N(0, tc_noise^2) (section 3.2)."""
+        """TC1..TC4 at the plant's current time t: bilinear in the field (lagged and biased with a truth) plus
+        N(0, tc_noise^2) (section 3.2)."""
         self._check_time(t, "read")
-        values = self.thermocouples.read(self._state.T, self._rng, self._tc_noise)
+        if self._sensors is None:
+            values = self.thermocouples.read(self._state.T, self._rng, self._tc_noise)
+        else:
+            values = self._sensors.values()
+            if self._tc_noise > 0.0:
+                values = values + self._tc_noise * self._rng.standard_normal(values.shape)
         return Readings(values=values, timestamps=np.full(len(values), float(t)),
                         status=tuple("good" for _ in values))
 
     def apply(self, u: Array, t: float) -> None:
-        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1])."""
+        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]).
+
+        With a truth the lamps radiate the lagged power (its mean over the sample, held by the plant)
+        and the thermocouples follow the plate with their lag."""
         self._check_time(t, "apply")
-        self._state = self.plant.advance(self._state, u, self.t_s, self._eta_of_t)
+        power = u if self._lamps is None else self._lamps.step(u, self.t_s)
+        self._state = self.plant.advance(self._state, power, self.t_s, self._eta_of_t)
+        if self._sensors is not None:
+            self._sensors.advance(self._state.T, self.t_s)
 
     def motion(self, t: float) -> Motion:
         return Motion(eta=float(self._eta_of_t(t)), oscillation=self._oscillation, since=self._since)

@@ -1,0 +1,77 @@
+// The heat map of the shown run's estimated field: the fillet, the four TCs with their readings in K, a
+// colour scale that follows the field (auto, in 10 K steps) or stays where the user fixed it.
+import { $, fmt } from "./page.js";
+import { state } from "./state.js";
+
+const TURBO = [[0, "#30123b"], [0.1, "#4145ab"], [0.2, "#4675ed"], [0.3, "#39a2fc"], [0.4, "#1bcfd4"],
+  [0.5, "#24eca6"], [0.6, "#61fc6c"], [0.7, "#a4fc3b"], [0.8, "#d1e834"], [0.9, "#f3c63a"], [1, "#7a0403"]];
+const KEY = "furnace-twin-heat-scale";
+const LABEL = { bgcolor: "rgba(20, 26, 38, 0.78)", font: { color: "#fff", size: 10.5 }, borderpad: 2, showarrow: false };
+
+export const heat = { mode: "auto", lo: null, hi: null };
+
+function scaleOf(z) {
+  if (heat.mode === "fixed" && heat.lo !== null && heat.hi !== null && heat.hi > heat.lo) return [heat.lo, heat.hi];
+  let lo = Infinity, hi = -Infinity;
+  for (const row of z || []) for (const v of row) if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+  if (!Number.isFinite(lo)) return [undefined, undefined];
+  lo = 10 * Math.floor(lo / 10); hi = 10 * Math.ceil(hi / 10);
+  if (hi - lo < 20) { const mid = (lo + hi) / 2; lo = mid - 10; hi = mid + 10; }
+  return [lo, hi];
+}
+
+export function heatmapFigure() {
+  const fu = state.furnace, s = state.series;
+  const [x0, x1, y0, y1] = fu.fillet;
+  const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
+  const tcx = tcRel.map((p) => p[0] * fu.L_s), tcy = tcRel.map((p) => p[1] * fu.W_s);
+  const z = s && s.field ? s.field : null;
+  const [zmin, zmax] = scaleOf(z);
+  const tc = s && s.tc ? s.tc : [null, null, null, null];
+  const f = state.lastFrame;
+  $("heat-sub").textContent = f ? `t = ${fmt(f.t)} s · mean ${fmt(f.T_mean_hat)} K · ref ${fmt(f.T_ref)} K` : "";
+  // TC1-TC3 above their marks, TC4 (between TC1 and TC3) below: the labels do not cover each other
+  const place = [{ yshift: 13 }, { yshift: 13 }, { yshift: 13 }, { yshift: -14 }];
+  const annotations = tcx.map((x, i) => ({ ...LABEL, ...place[i], x, y: tcy[i],
+    text: `TC${i + 1}${i === 3 ? " (val.)" : ""}${tc[i] === null || tc[i] === undefined ? "" : ` ${fmt(tc[i])} K`}` }));
+  annotations.push({ ...LABEL, x: x0, y: y1, xanchor: "left", yanchor: "top", xshift: 3, yshift: -3, text: "fillet" });
+  return {
+    data: [
+      { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best", zmin, zmax, zauto: zmin === undefined,
+        colorbar: { title: { text: "T (K)", side: "right" }, thickness: 12, len: 0.95 },
+        hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>%{z:.1f} K<extra></extra>" },
+      { type: "scatter", mode: "markers", x: tcx, y: tcy, hoverinfo: "skip", showlegend: false,
+        marker: { symbol: ["circle", "circle", "circle", "diamond"], size: 9, color: ["#fff", "#fff", "#fff", "#ff4fc8"],
+          line: { color: "#000", width: 1.5 } } },
+    ],
+    layout: {
+      margin: { l: 50, r: 10, t: 6, b: 34 }, paper_bgcolor: "#fff", plot_bgcolor: "#e8ecf2", font: { size: 11, color: "#1d2330" },
+      xaxis: { title: { text: "x (m), along the specimen length", standoff: 2 }, range: [0, fu.L_s], constrain: "domain" },
+      yaxis: { title: { text: "y (m)", standoff: 2 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
+      shapes: [{ type: "rect", x0, x1, y0, y1, line: { color: "#fff", width: 2, dash: "dash" } }],
+      annotations,
+    },
+  };
+}
+
+// The colour-scale controls: auto / fixed with lowest and highest K, kept in this browser.
+export function wireHeatScale(onChange) {
+  try { Object.assign(heat, JSON.parse(localStorage.getItem(KEY) || "{}")); } catch (e) { /* defaults */ }
+  const sp = state.furnace.limits.reference.setpoint;
+  if (heat.lo === null) heat.lo = state.furnace.limits.reference.points.temperature.min;
+  if (heat.hi === null) heat.hi = sp.max;
+  $("heat-lo").value = heat.lo; $("heat-hi").value = heat.hi;
+  for (const el of document.querySelectorAll("input[name=heat-mode]")) el.checked = el.value === heat.mode;
+  const update = () => {
+    heat.mode = document.querySelector("input[name=heat-mode]:checked").value;
+    const lo = Number($("heat-lo").value), hi = Number($("heat-hi").value);
+    if ($("heat-lo").value !== "" && $("heat-hi").value !== "" && hi > lo) { heat.lo = lo; heat.hi = hi; }
+    for (const id of ["heat-lo", "heat-hi"]) $(id).classList.toggle("invalid", !(hi > lo));
+    try { localStorage.setItem(KEY, JSON.stringify(heat)); } catch (e) { /* not kept */ }
+    onChange();
+  };
+  for (const el of document.querySelectorAll("input[name=heat-mode], #heat-lo, #heat-hi")) el.addEventListener("input", update);
+  for (const el of document.querySelectorAll("#heat-lo, #heat-hi")) el.addEventListener("focus", () => {
+    if (heat.mode !== "fixed") { document.querySelector("input[name=heat-mode][value=fixed]").checked = true; update(); }
+  });
+}

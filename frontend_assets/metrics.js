@@ -1,0 +1,51 @@
+// The metrics (product.md) in words, in K and in % of the setpoint, for one run or side by side.
+// Relative values come from the server; K = relative x the setpoint of the run's metric windows.
+import { helpMark, metricName } from "./glossary.js";
+import { esc, fmt } from "./page.js";
+import { state } from "./state.js";
+
+// the order of GET /api/glossary's metrics (twin.runs.metrics.METRIC_WORDS)
+const keys = () => (state.glossary ? Object.keys(state.glossary.metrics) : []);
+
+// The setpoint the relative errors of a run are divided by: its windows' (the last reference).
+export function scaleOf(run) {
+  if (run.windows && run.windows.setpoint) return run.windows.setpoint;
+  const ref = run.scenario.reference || {};
+  return ref.points ? ref.points[ref.points.length - 1][1] : ref.setpoint;
+}
+
+const kelvin = (v, scale) => (v === null || v === undefined ? "–" : `${fmt(v * scale, 1)} K`);
+const percent = (v) => (v === null || v === undefined ? "–" : `${fmt(100 * v, 2)} %`);
+
+function windowNote(run) {
+  const w = run.windows;
+  if (!w) return "";
+  const from = w.t0 > 0 ? `from the reference change at t = ${fmt(w.t0)} s: ` : "";
+  return `${from}transient ${fmt(w.transient[0], 0)}–${fmt(w.transient[1], 0)} s, steady ${fmt(w.steady[0], 0)}–${fmt(w.steady[1], 0)} s; `
+    + `% of ${fmt(w.setpoint, 0)} K`;
+}
+
+// One run: metric | K | %, with a help mark per metric and the windows they were taken over.
+export function metricsTable(run) {
+  const m = run.metrics;
+  if (!m) return `<div class="note">metrics when the run ends · ${esc(windowNote(run))}</div>`;
+  const scale = scaleOf(run);
+  const rows = keys().filter((k) => k in m).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
+    + `<td class="num">${kelvin(m[k], scale)}</td><td class="num">${percent(m[k])}</td></tr>`).join("");
+  return `<div class="note">${esc(windowNote(run))}</div><table><thead><tr><th>metric</th><th class="num">K</th>`
+    + `<th class="num">% of setpoint</th></tr></thead><tbody>${rows}</tbody></table>`;
+}
+
+// Several runs side by side: one column per run ("K · %"), one row per metric.
+export function compareTable(runs, names) {
+  const head = runs.map((r, i) => `<th class="num">${esc(names[i])}</th>`).join("");
+  const rows = keys().map((k) => {
+    const cells = runs.map((r) => {
+      const v = r.metrics ? r.metrics[k] : undefined;
+      return `<td class="num">${v === undefined || v === null ? "–" : `${kelvin(v, scaleOf(r))} · ${percent(v)}`}</td>`;
+    }).join("");
+    return `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>${cells}</tr>`;
+  }).join("");
+  const notes = runs.map((r, i) => `${esc(names[i])}: ${r.metrics ? esc(windowNote(r)) : "metrics when it ends"}`).join("<br>");
+  return `<table><thead><tr><th>metric</th>${head}</tr></thead><tbody>${rows}</tbody></table><div class="note">${notes}</div>`;
+}

@@ -1,0 +1,112 @@
+// The shown run: its card (what it is, files, metrics), the live controls, and its history: a page that
+// connects to a running run reads everything so far (GET .../series), then continues with the stream.
+import { api } from "./api.js";
+import { addEvents, clearEvents, noteStatus } from "./events.js";
+import { setLiveOscillation } from "./inputs.js";
+import { metricsTable } from "./metrics.js";
+import { $, badge, describeOscillation, describeReference, esc, fmt, LIVE, showMsg } from "./page.js";
+import { markShown, refreshRuns } from "./runlist.js";
+import { emptySeries, seriesFromStored } from "./series.js";
+import { state } from "./state.js";
+import { applyFrame, closeStream, connectStream } from "./stream.js";
+
+// The live controls act on the shown run only while it runs.
+function setControls(run) {
+  const live = run && LIVE.includes(run.status);
+  for (const id of ["ref-btn", "osc-btn", "stop-btn"]) $(id).disabled = !live;
+  $("ctl-run").textContent = run ? `· ${run.label || run.id}` : "";
+  setLiveOscillation(run ? run.oscillation : null);
+}
+
+function fileLinks(run) {
+  const f = run.files || {}, base = `/api/runs/${run.id}`;
+  const links = [];
+  if (f.timeseries || LIVE.includes(run.status)) {
+    links.push(`<a href="${base}/export.csv" download>CSV</a>`, `<a href="${base}/report.pdf" download>report PDF</a>`,
+      `<a href="${base}/report.png" download>report PNG</a>`);
+  }
+  if (f.timeseries) links.push(`<a href="${base}/timeseries" download>npz</a>`);
+  if (f.recording) links.push(`<a href="${base}/recording" download title="rerun recording: rerun FILE">rrd</a>`);
+  if (state.health && state.health.viser_url) links.push(`<a href="${state.health.viser_url}" target="_blank" rel="noopener">3D view</a>`);
+  return links.join(" ");
+}
+
+function renderRunInfo(run) {
+  const sc = run.scenario;
+  const now = LIVE.includes(run.status) ? "now" : "at the end";
+  $("run-title").textContent = `· ${run.label ? `${run.label} · ` : ""}${run.id}`;
+  $("run-details").innerHTML = `
+    <div><span class="badge ${esc(run.status)}">${esc(run.status)}</span>${run.error ? ` <span class="msg err">${esc(run.error)}</span>` : ""}
+      · started ${new Date((run.started_at || run.created_at) * 1000).toLocaleString()}</div>
+    <div>reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})</div>
+    <div class="muted">${sc.duration} s · speed ${esc(sc.speed)} · TC4 at (${sc.tc4.join(", ")}) · noise ${sc.tc_noise} K · seed ${sc.seed}
+      · <button class="link" id="reuse-btn" title="copy this run's scenario into the New run form">use as new run</button></div>`;
+  $("run-files").innerHTML = fileLinks(run);
+  $("run-metrics").innerHTML = metricsTable(run);
+  $("reuse-btn").addEventListener("click", () => reuseScenario(run.scenario));
+}
+
+// The New run form takes a run's scenario (its reference as it started).
+function reuseScenario(sc) {
+  const form = $("start-form"), set = (name, v) => { form.elements[name].value = String(v); };
+  const points = !!sc.reference.points;
+  for (const el of form.elements.refmode) { el.checked = el.value === (points ? "points" : "transition"); el.dispatchEvent(new Event("change")); }
+  if (points) form.elements.points.value = sc.reference.points.map(([t, T]) => `${t}, ${T}`).join("\n");
+  else { set("setpoint", sc.reference.setpoint); set("t_E", sc.reference.t_E); }
+  set("duration", sc.duration); set("speed", sc.speed); form.elements.osc.checked = sc.oscillation.enabled;
+  set("amplitude", sc.oscillation.amplitude); set("period", sc.oscillation.period); set("tc4x", sc.tc4[0]); set("tc4y", sc.tc4[1]);
+  set("tc_noise", sc.tc_noise); set("seed", sc.seed); set("m_eps", sc.mismatch.emissivity); set("m_alpha", sc.mismatch.alpha);
+  set("m_lamp", sc.mismatch.lamp_efficiency);
+  form.dispatchEvent(new Event("input"));
+  showMsg(`the form holds the scenario of run ${state.runId}`, false, "start-msg");
+}
+
+export async function refreshRun(quiet = false) {
+  if (!state.runId) return;
+  try {
+    const run = await api("GET", `/api/runs/${state.runId}`);
+    if (run.id !== state.runId) return; // another run was picked meanwhile
+    const before = state.run && state.run.id === run.id ? JSON.stringify([run.changes, run.windows]) : null;
+    const changed = !state.run || JSON.stringify([state.run.changes, state.run.windows]) !== before;
+    state.run = run;
+    badge(run.status);
+    setControls(run);
+    renderRunInfo(run);
+    if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
+    if (changed) state.dirty = true; // reference markers, windows
+  } catch (e) { /* transient */ }
+}
+
+// Everything so far: the stored (or live) series with its events, then the frames that came meanwhile.
+async function loadHistory(runId) {
+  try {
+    const d = await api("GET", `/api/runs/${runId}/series`);
+    if (state.runId !== runId) return;
+    state.series = seriesFromStored(d);
+    state.series.windows = d.windows;
+    state.historyEnd = d.t_last; // the last sample the history brought; the stream continues after it
+    addEvents(d.events);
+    const n = d.t ? d.t.length : 0;
+    if (n) state.lastFrame = { t: d.t[n - 1], T_mean_hat: d.T_mean_hat[n - 1], T_ref: d.T_ref[n - 1] };
+    $("run-clock").textContent = n ? `t = ${fmt(d.t[n - 1])} s` : "";
+  } catch (e) {
+    if (e.status !== 404) showMsg(`the run's history could not be read: ${e.message}`, true);
+  }
+}
+
+export async function selectRun(runId) {
+  closeStream();
+  Object.assign(state, { runId, series: emptySeries(), lastFrame: null, frames: 0, run: null, lastStatus: null,
+    oscShown: null, loading: true, held: [] });
+  clearEvents();
+  markShown();
+  await refreshRun(true);
+  const run = state.run;
+  if (!run || run.id !== runId) return;
+  if (LIVE.includes(run.status)) await connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
+  await loadHistory(runId);
+  if (state.runId !== runId) return;
+  state.loading = false;
+  for (const f of state.held.splice(0)) applyFrame(f); // only those after the history's last sample count
+  state.dirty = true;
+}

@@ -1,0 +1,89 @@
+"""The Studies view in a real browser (Debian chromium via playwright) on a real server whose studies run
+on a 2-worker Dask LocalCluster: a study typed as JSON runs to the end and shows its progress, best case
+per metric, figures and downloads; invalid JSON and a study the server refuses (422) say why on the
+message line.  Screenshot: test-artifacts/studies-view.png."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+from test_browser import _open_dashboard, _wait_text
+
+from backend.app import create_app
+from backend.settings import Settings
+from backend.threaded_server import ThreadedServer, free_port
+
+pytestmark = pytest.mark.browser
+
+TOKEN = "studies-browser-token-0123"
+STUDY = {"name": "browser study", "base": {"duration": 12.0, "reference": {"setpoint": 900.0, "t_E": 6.0}},
+         "grid": {"tc_noise": [0.5, 1.0], "seed": [1, 2]}}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory, small_cfg, radiation_cache):
+    s = Settings(data_dir=tmp_path_factory.mktemp("studies"), viser_port=0, study_workers=2)
+    with ThreadedServer(create_app(s, small_cfg), free_port()) as srv:
+        yield srv
+
+
+def _fill(page, text: str) -> None:
+    page.fill("#study-text", text)
+
+
+def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
+    page, errors = _open_dashboard(browser, server.url)
+    page.click("#view-studies")
+    assert page.is_hidden("main") and page.is_visible("#studies-view")
+    # the example comes with the furnace's default amplitude
+    example = json.loads(page.input_value("#study-text"))
+    assert example["grid"]["oscillation.amplitude"][-1] == pytest.approx(0.048)
+
+    _fill(page, "{not json")
+    page.click("#study-form button[type=submit]")
+    _wait_text(page, "#study-msg", "not valid JSON")
+    _fill(page, json.dumps({"grid": {"oscillation.perod": [6.0]}}))
+    page.click("#study-form button[type=submit]")
+    _wait_text(page, "#study-msg", "422")
+    assert "oscillation.perod" in page.inner_text("#study-msg")
+    assert httpx.get(f"{server.url}/api/studies").json() == []
+
+    _fill(page, json.dumps(STUDY))
+    page.click("#study-form button[type=submit]")
+    _wait_text(page, "#study-msg", "4 cases")
+    _wait_text(page, "#study-list", "browser study")
+    _wait_text(page, "#study-detail", "finished", timeout=240_000)
+    page.wait_for_function("document.querySelectorAll('#study-detail .figures img').length >= 1")
+    page.wait_for_function("[...document.querySelectorAll('#study-detail .figures img')].every(i => i.complete"
+                           " && i.naturalWidth > 0)")
+    detail = page.inner_text("#study-detail")
+    assert "4 / 4" in detail and "Best case per metric" in detail and "inhomogeneity_steady" in detail
+    links = page.eval_on_selector_all("#study-detail .downloads a", "as => as.map(a => a.textContent)")
+    assert set(links) == {"results.parquet", "results.csv", "study.md", "summary.json"}
+    csv = httpx.get(server.url + page.get_attribute("#study-detail .downloads a[href$='results.csv']", "href"))
+    assert csv.status_code == 200 and len(csv.text.strip().splitlines()) == 5
+    assert page.is_disabled("#study-stop") and page.is_disabled("#study-resume")
+    page.screenshot(path=str(artifacts / "studies-view.png"))
+    assert errors == []
+
+
+def test_with_a_token_figures_and_downloads_carry_it(browser, tmp_path, small_cfg) -> None:
+    """A server with an API token: a study started from the view after entering the token; its figure is
+    fetched with the token header (a blob URL) and shows."""
+    from conftest import FakeStudyRunner
+
+    s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token=TOKEN)
+    with ThreadedServer(create_app(s, small_cfg, study_runner=FakeStudyRunner()), free_port()) as srv:
+        page, errors = _open_dashboard(browser, srv.url)
+        page.wait_for_selector("#token-box", state="visible")
+        page.fill("#token", TOKEN)
+        page.dispatch_event("#token", "change")
+        page.click("#view-studies")
+        _fill(page, json.dumps({"name": "with token", "grid": {"tc_noise": [0.5, 1.0]}}))
+        page.click("#study-form button[type=submit]")
+        _wait_text(page, "#study-detail", "finished", timeout=30_000)
+        page.wait_for_function("(() => { const i = document.querySelector('#study-detail .figures img');"
+                               " return i && i.src.startsWith('blob:') && i.complete && i.naturalWidth === 1; })()")
+        assert errors == []

@@ -1,0 +1,84 @@
+"""The Dask cluster a study runs on: a ``LocalCluster`` (one single-threaded process worker per core, on
+loopback, no dashboard) or an existing scheduler (``dask scheduler`` + ``dask worker`` processes).
+
+Example
+-------
+>>> with study_client(workers=2) as (client, n):   # doctest: +SKIP
+...     client.submit(sum, [1, 2]).result()
+3
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from distributed import WorkerPlugin
+
+log = logging.getLogger(__name__)
+
+#: how long to wait for an existing scheduler to answer and to have at least one worker (s)
+CONNECT_TIMEOUT_S = 30.0
+
+
+class ClusterError(RuntimeError):
+    """The cluster cannot be started or reached; the message says what to check."""
+
+
+class QuietCaseLogs(WorkerPlugin):
+    """Worker plugin of a study's own LocalCluster: the cases' ``twin`` warnings go into their records
+    (``warnings``, ``warning_messages``) instead of the terminal, where they would bury the progress bar."""
+
+    name = "furnace-twin-quiet-case-logs"
+
+    def setup(self, worker: Any) -> None:
+        logging.getLogger("twin").addHandler(logging.NullHandler())  # no fallback print to stderr
+
+
+def default_workers() -> int:
+    """One worker per core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextmanager
+def study_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[tuple[Any, int]]:
+    """A ``distributed.Client`` and its number of workers; the LocalCluster (if any) ends with the block."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except OSError as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        try:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+            except TimeoutError:
+                raise ClusterError(f"the Dask scheduler at {scheduler} has no workers "
+                                   f"(start some: dask worker {scheduler} --nthreads 1)") from None
+            n = len(client.scheduler_info(n_workers=-1)["workers"])
+            log.info("study on the Dask scheduler %s with %d workers", scheduler, n)
+            yield client, n
+        finally:
+            client.close()
+        return
+    n = workers or default_workers()
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, silence_logs=logging.WARNING)
+    try:
+        client = Client(cluster)
+        try:
+            client.register_plugin(QuietCaseLogs())
+            log.info("study on a LocalCluster with %d process workers", n)
+            yield client, n
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+

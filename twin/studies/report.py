@@ -1,0 +1,215 @@
+"""``study.md``: what a user reads first — the best case per metric, percentiles, failures, figures, timing.
+
+Metrics are errors (smaller is better) in % of the setpoint T_ref(t_E).  With a grid and Monte Carlo
+samples, "best" is the grid point with the smallest median over the samples.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import defaultdict
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.runs.metrics import METRIC_KEYS
+from twin.studies.spec import StudySpec
+from twin.studies.store import write_atomic
+
+REPORT_PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def _pct(v: float | None) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{100 * v:.2f} %"
+
+
+def _value(v: Any) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else json.dumps(v)
+
+
+def _params(p: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k} = {_value(v)}" for k, v in p.items()) or "(base)"
+
+
+def _metric_keys(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    present = {k for r in rows for k, v in (r.get("metrics") or {}).items() if isinstance(v, (int, float))}
+    return [k for k in METRIC_KEYS if k in present]
+
+
+def _finished(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    return [r for r in rows if r["status"] in ("done", "skipped") and r.get("metrics")]
+
+
+def best_cases(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per metric: the best case (or grid point, by the median over the samples) and its value."""
+    done = _finished(rows)
+    out = []
+    for m in _metric_keys(done):
+        if spec.grid and spec.monte_carlo is not None:
+            groups: dict[str, list[float]] = defaultdict(list)
+            params: dict[str, dict[str, Any]] = {}
+            for r in done:
+                v = r["metrics"].get(m)
+                point = {p: r["params"][p] for p in spec.grid}
+                k = json.dumps(point, sort_keys=True)
+                params[k] = point
+                if v is not None:
+                    groups[k].append(v)
+            if not groups:
+                continue
+            k = min(groups, key=lambda g: float(np.median(groups[g])))
+            out.append({"metric": m, "value": float(np.median(groups[k])), "params": params[k],
+                        "key": None, "n": len(groups[k])})
+        else:
+            cand = [r for r in done if r["metrics"].get(m) is not None]
+            if not cand:
+                continue
+            r = min(cand, key=lambda r: r["metrics"][m])
+            out.append({"metric": m, "value": r["metrics"][m], "params": r["params"], "key": r["key"], "n": 1})
+    return out
+
+
+def percentiles(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per metric over the finished cases: p5, p25, p50, p75, p95, mean and max (fractions)."""
+    done = _finished(rows)
+    out = {}
+    for m in _metric_keys(done):
+        v = np.array([r["metrics"][m] for r in done if r["metrics"].get(m) is not None], float)
+        if v.size:
+            out[m] = {**{f"p{q}": float(np.percentile(v, q)) for q in REPORT_PERCENTILES},
+                      "mean": float(v.mean()), "max": float(v.max()), "n": int(v.size)}
+    return out
+
+
+def write_report(path: Path, spec: StudySpec, furnace: str, summary: Mapping[str, Any]) -> Path:
+    rows = summary["cases"]
+    lines = [f"# Study: {spec.name or path.parent.name}", ""]
+    lines += [f"- furnace: `{furnace}`", f"- cases: {len(rows)} ({summary['computed']} computed now, "
+              f"{summary['skipped']} found done earlier, {summary['failed']} failed, {summary['pending']} pending)",
+              f"- results: `{Path(summary['results']).name}` (and `results.csv`)"]
+    for i, inv in enumerate(summary.get("invocations") or [summary], 1):
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(inv["at"])) if "at" in inv else ""
+        lines.append(f"- invocation {i} {when}: {inv['computed']} cases computed ({inv['failed']} failed), "
+                     f"{inv['skipped']} found done, {inv['pending']} left pending; {inv['workers']} workers, "
+                     f"{inv['wall_s']:.1f} s")
+    lines.append("")
+    lines += ["## What varies", ""]
+    for p, values in spec.grid.items():
+        lines.append(f"- grid `{p}`: {', '.join(json.dumps(v) for v in values)}")
+    if spec.monte_carlo is not None:
+        mc = spec.monte_carlo
+        lines.append(f"- Monte Carlo: n = {mc.n}, seed = {mc.seed}, TC-noise seeds {mc.seeds.replace('_', ' ')}"
+                     + (" (crossed with the grid: each grid point runs every sample)" if spec.grid else ""))
+        for p, d in mc.fields.items():
+            args = ", ".join(f"{k} = {v}" for k, v in d.model_dump().items() if k != "dist" and v is not None)
+            lines.append(f"  - `{p}` ~ {d.dist}({args})")
+    lines.append("")
+    lines += ["## Best case per metric", "",
+              "Errors relative to the setpoint; smaller is better."
+              + (" Grid points ranked by their median over the samples." if spec.grid and spec.monte_carlo else ""),
+              "", "| metric | best | where |", "|---|---|---|"]
+    for b in best_cases(spec, rows):
+        where = _params(b["params"]) + (f" (case `{b['key']}`)" if b["key"] else f" (median of {b['n']})")
+        lines.append(f"| {b['metric']} | {_pct(b['value'])} | {where} |")
+    lines.append("")
+    if spec.monte_carlo is not None:
+        lines += _percentile_section(spec, rows)
+        lines += _sensitivity_section(spec, rows)
+    failed = [r for r in rows if r["status"] == "failed"]
+    if failed:
+        lines += ["## Failed cases", "", "| case | parameters | error |", "|---|---|---|"]
+        lines += [f"| `{r['key']}` | {_params(r['params'])} | {str(r['error']).replace('|', '/')} |" for r in failed]
+        lines.append("")
+    figures = summary.get("figures") or []
+    if figures:
+        lines += ["## Figures", ""]
+        lines += [f"![{Path(f).stem}](figures/{Path(f).name})" for f in figures]
+        lines.append("")
+    lines += _timing_section(summary.get("timing") or {})
+    write_atomic(path, "\n".join(lines).encode())
+    return path
+
+
+def _percentile_section(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    lines = ["## Percentiles over the Monte Carlo samples", ""]
+    if not spec.grid:
+        head = " | ".join(f"p{q}" for q in REPORT_PERCENTILES)
+        lines += [f"| metric | {head} | mean | max |", "|---|" + "---|" * (len(REPORT_PERCENTILES) + 2)]
+        for m, p in percentiles(rows).items():
+            cells = [_pct(p[f"p{q}"]) for q in REPORT_PERCENTILES] + [_pct(p["mean"]), _pct(p["max"])]
+            lines.append(f"| {m} | " + " | ".join(cells) + " |")
+        return [*lines, ""]
+    by_point: dict[str, list[Mapping[str, Any]]] = defaultdict(list)
+    for r in rows:
+        by_point[_params({p: r["params"][p] for p in spec.grid})].append(r)
+    stats = {k: percentiles(v) for k, v in by_point.items()}
+    metrics = [m for m in METRIC_KEYS if any(m in s for s in stats.values())]
+    lines += ["Each cell: p50 (p95).", "", "| grid point | " + " | ".join(metrics) + " |",
+              "|---|" + "---|" * len(metrics)]
+    for k, s in stats.items():
+        cells = [f"{_pct(s[m]['p50'])} ({_pct(s[m]['p95'])})" if m in s else "n/a" for m in metrics]
+        lines.append(f"| {k} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
+def sensitivities(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
+    """Spearman rank correlation of each metric with each numeric Monte Carlo field, over the finished
+    cases (with a grid: the mean of the correlations within each grid point)."""
+    from scipy.stats import spearmanr
+
+    if spec.monte_carlo is None:
+        return {}
+    done = _finished(rows)
+    groups: dict[str, list[Mapping[str, Any]]] = defaultdict(list)
+    for r in done:
+        groups[json.dumps({p: r["params"][p] for p in spec.grid}, sort_keys=True)].append(r)
+    fields = [f for f in spec.monte_carlo.fields
+              if all(isinstance(r["params"].get(f), (int, float)) and not isinstance(r["params"].get(f), bool)
+                     for r in done)]
+    out: dict[str, dict[str, float]] = {}
+    for m in _metric_keys(done):
+        for f in fields:
+            rhos = []
+            for members in groups.values():
+                pairs = [(r["params"][f], r["metrics"][m]) for r in members if r["metrics"].get(m) is not None]
+                if len(pairs) >= 3 and len({p[0] for p in pairs}) > 1 and len({p[1] for p in pairs}) > 1:
+                    rhos.append(float(spearmanr([p[0] for p in pairs], [p[1] for p in pairs]).statistic))
+            if rhos:
+                out.setdefault(m, {})[f] = float(np.mean(rhos))
+    return out
+
+
+def _sensitivity_section(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    table = sensitivities(spec, rows)
+    fields = sorted({f for v in table.values() for f in v}, key=list(spec.monte_carlo.fields).index) \
+        if spec.monte_carlo else []
+    if not fields:
+        return []
+    lines = ["## Which model error drives which metric", "",
+             "Spearman rank correlation over the samples (+1: the metric grows with the field; |rho| < 0.25 is "
+             "hardly distinguishable from none at n = 60)" + (", mean over the grid points" if spec.grid else "")
+             + ".", "", "| metric | " + " | ".join(f"`{f}`" for f in fields) + " |", "|---|" + "---|" * len(fields)]
+    for m, row in table.items():
+        lines.append(f"| {m} | " + " | ".join(f"{row[f]:+.2f}" if f in row else "n/a" for f in fields) + " |")
+    return [*lines, ""]
+
+
+def _timing_section(t: Mapping[str, Any]) -> list[str]:
+    if not t.get("cases"):
+        return []
+
+    def s(v: Any, fmt: str = "{:.3f} s") -> str:
+        return "n/a" if v is None else fmt.format(v)
+
+    return ["## Timing", "",
+            f"- case (loop build with the feedforward OCP, samples, metrics): median {s(t['case_s'])}",
+            f"- hand-off between cases on a worker: median {s(t['gap_s'])}, mean {s(t['gap_s_mean'])}",
+            f"- set-up per case with the furnace cached: median {s(t['setup_s'])}; first case of a worker "
+            f"(loads the radiation tables): median {s(t['load_s'])}",
+            f"- per-case overhead (hand-off + cached set-up): {s(t['overhead_fraction'], '{:.2%}')} of a case",
+            f"- this invocation: {t['computed']} cases on {t['workers']} workers in {t['wall_s']:.1f} s, worker "
+            f"efficiency {s(t['efficiency'], '{:.0%}')} (busy / (wall x workers), cluster start-up included)", ""]
+
