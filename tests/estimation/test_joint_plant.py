@@ -75,7 +75,7 @@ def weaker_lamps(small_radiation):
     runs = {}
     for seed in (41, 42):
         scenario = Scenario.model_validate({
-            "reference": {"setpoint": SETPOINT, "t_E": 60.0}, "duration": 240.0, "seed": seed,
+            "reference": {"setpoint": SETPOINT, "t_E": 60.0}, "duration": 240.0, "seed": seed, "truth": "shared",
             "mismatch": {"lamp_efficiency": -0.1}, "estimator": {"motion": "position_aware", "calibrate": True}})
         loop = ClosedLoop(CFG, scenario, small_radiation)
         for _ in loop.run():
