@@ -342,6 +342,7 @@ class Calibration(_Section):
     prior_sigma: ParameterValues
     random_walk: ParameterValues  # 1/sqrt(s): the parameter's assumed drift rate
     bounds: ParameterBounds
+    controller_follows: bool = False  # re-plan the controller's model with the calibrated parameters
     replan_threshold: float = Field(gt=0)  # a parameter move (relative) that re-plans the controller
     replan_interval: float = Field(ge=0)  # s between two re-plans for the calibration
 
