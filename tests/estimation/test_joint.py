@@ -118,3 +118,28 @@ def test_parameters_are_kept_within_bounds(tables) -> None:
         est.predict(np.zeros(6))
     assert lo <= est.parameters.lamp_efficiency <= hi
     assert est.calibration()["lamp_efficiency"]["sigma"] > 0.0
+
+
+def test_consider_states_keep_their_value_and_the_joseph_covariance() -> None:
+    """ekf_update(consider=k): the last k states are not moved by the readings (Schmidt-Kalman); oracle: the
+    Joseph form (I - K C) P (I - K C)^T + K R K^T written out with the optimal gain's last k rows set to 0."""
+    from twin.estimation.ekf import EKFState, ekf_update
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(5, 5))
+    P = A @ A.T + 5 * np.eye(5)
+    C = rng.normal(size=(2, 5))
+    R = np.diag([0.5, 2.0])
+    x = rng.normal(size=5)
+    y = C @ x + np.array([1.0, -2.0])
+    got, _ = ekf_update(EKFState(x, P), y, C, R, np.inf, consider=2)
+    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    K[-2:] = 0.0
+    I_KC = np.eye(5) - K @ C
+    assert np.allclose(got.theta, x + K @ (y - C @ x), atol=1e-12)
+    assert np.array_equal(got.theta[-2:], x[-2:])
+    assert np.allclose(got.P, I_KC @ P @ I_KC.T + K @ R @ K.T, atol=1e-10)
+    # the considered uncertainty still acts: the first states' gain is the optimal one's, not that of a filter
+    # that knew the last two exactly
+    full, _ = ekf_update(EKFState(x, P), y, C, R, np.inf)
+    assert np.allclose(full.theta[:3], got.theta[:3], atol=1e-12)

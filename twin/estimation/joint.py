@@ -131,9 +131,11 @@ class JointEstimator:
         self._rad.clear()
 
     # ---- the filter
-    def update(self, y: ArrayLike) -> EKFState:
-        """Measurement update (13) with TC1..3 (K) on the augmented state; p kept within its bounds."""
-        x, self.last_info = ekf_update(self._x, y, self.C, self.R, self.gate)
+    def update(self, y: ArrayLike, learn: bool = True) -> EKFState:
+        """Measurement update (13) with TC1..3 (K) on the augmented state; p kept within its bounds.
+        ``learn=False``: the parameters are consider states (:func:`twin.estimation.ekf.ekf_update`): kept,
+        their uncertainty still counted."""
+        x, self.last_info = ekf_update(self._x, y, self.C, self.R, self.gate, 0 if learn else self.k)
         if self.k:
             p = x.theta[self.n:]
             clipped = np.clip(p, self._lo, self._hi)

@@ -309,8 +309,8 @@ class ClosedLoop:
             self._readings = None
             eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
-            theta, shadow = self.estimators.update(readings.for_estimator())  # eq. 13 (faulty readings gated)
             holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
+            theta, shadow = self.estimators.update(readings.for_estimator(), learn=holding)  # eq. 13
             due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
             if due is not None:  # the controller's model follows the calibration (re-planned like a change)
                 self._request("calibration", due)
