@@ -6,6 +6,7 @@ process with ``ClosedLoop`` (runs are deterministic for a seed).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 
@@ -17,13 +18,27 @@ import pytest
 from twin.config import small_config
 from twin.runs.loop import ClosedLoop
 from twin.runs.metrics import METRIC_KEYS
+from twin.scenario import PointsReference
 from twin.studies.cases import expand
 from twin.studies.cluster import study_client
 from twin.studies.engine import run_study
 from twin.studies.spec import parse_study
 
 BASE = {"duration": 12.0, "reference": {"setpoint": 900.0, "t_E": 6.0}}
-UNREACHABLE = {"points": [[1.0, 280.0]]}  # below the coldest surroundings (300 K): ClosedLoop refuses it
+UNREACHABLE = {"points": [[1.0, 280.0]]}  # below the coldest surroundings (300 K): outside the furnace's limits
+
+
+def _with_unreachable(cases):
+    """The grid's second reference replaced by ``UNREACHABLE``, past the study's own checks (which refuse it,
+    as POST /api/runs does): a case the worker cannot run, as a client of another version could send it.
+    The worker's check of the scenario against the furnace's limits fails it; the study must go on."""
+    out = []
+    for c in cases:
+        if c.params["reference"] != BASE["reference"]:
+            bad = c.scenario.model_copy(update={"reference": PointsReference.model_construct(points=[(1.0, 280.0)])})
+            c = dataclasses.replace(c, scenario=bad, params={**c.params, "reference": UNREACHABLE})
+        out.append(c)
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -42,10 +57,12 @@ def cfg():
 def mixed(client, cfg, tmp_path_factory):
     """4 cases: two TC-noise levels x (a reachable, an unreachable reference)."""
     spec = parse_study({"name": "mixed", "base": BASE,
-                        "grid": {"reference": [BASE["reference"], UNREACHABLE], "tc_noise": [0.5, 2.0]}})
+                        "grid": {"reference": [BASE["reference"], {"setpoint": 950.0, "t_E": 6.0}],
+                                 "tc_noise": [0.5, 2.0]}})
     out = tmp_path_factory.mktemp("mixed")
     progress = []
-    summary = run_study(spec, cfg, out, client=client, on_progress=progress.append)
+    summary = run_study(spec, cfg, out, client=client, on_progress=progress.append,
+                        cases=_with_unreachable(expand(spec, cfg)))
     return spec, out, summary, progress
 
 
@@ -68,11 +85,11 @@ def test_a_failed_case_is_recorded_and_the_study_goes_on(mixed):
     assert len(by_status["done"]) == 2 and len(by_status["failed"]) == 2
     for c in by_status["failed"]:
         assert c["params"]["reference"] == UNREACHABLE and c["metrics"] is None
-        assert "unreachable" in c["error"] and "ReferenceError" in c["error"]
+        assert "outside the reachable range" in c["error"] and "ValidationError" in c["error"]
     assert summary["failed"] == 2 and summary["computed"] == 4
     assert progress[-1].finished == 4 and progress[-1].failed == 2
     report = (out / "study.md").read_text()
-    assert "## Failed cases" in report and "unreachable" in report
+    assert "## Failed cases" in report and "outside the reachable range" in report
 
 
 def test_results_table_columns_and_values_match_a_direct_run(mixed, cfg, small_radiation):

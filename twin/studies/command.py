@@ -66,8 +66,12 @@ def _ensure_radiation_tables(cfg: FurnaceConfig) -> None:
     """Ray-trace a missing radiation table here, with a progress bar, before the workers start: otherwise the
     first case of every worker would wait on the cache lock in silence.  Workers on other machines use their
     own cache (``FURNACE_TWIN_CACHE``)."""
+    from twin.furnace.simulated.truth import truth_radiation, truth_radiation_config
     from twin.radiation.cache import cache_path, load_or_compute
 
     if not cache_path(cfg).exists():
         log.info("radiation tables of this furnace are not cached yet: computing them once before the study")
         load_or_compute(cfg, progress=True)
+    if not cache_path(truth_radiation_config(cfg), symmetric=True).exists():
+        log.info("the simulated furnace's own radiation table (its truth) is not cached yet: computing it once")
+        truth_radiation(cfg, progress=True)

@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 
 _LOCK = threading.Lock()
 _FURNACES: dict[str, tuple[FurnaceConfig, Any, Any]] = {}  # digest -> config, radiation model, limits
+_TRUTHS: dict[str, Any] = {}  # digest -> the simulated furnace's own radiation model (issue 10's truth)
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,17 @@ def furnace_of(digest: str, furnace: dict[str, Any]) -> tuple[FurnaceConfig, Any
         _FURNACES[digest] = entry
         log.info("worker %s: furnace %s loaded", os.getpid(), digest)
         return (*entry, True)
+
+
+def truth_of(digest: str, cfg: FurnaceConfig) -> Any:
+    """The simulated furnace's own radiation model (``twin.furnace.simulated.truth``), loaded once per
+    worker process like the model's table (a case with ``truth = "shared"`` never asks for it)."""
+    with _LOCK:
+        if digest not in _TRUTHS:
+            from twin.furnace.simulated.truth import truth_radiation
+
+            _TRUTHS[digest] = truth_radiation(cfg)
+        return _TRUTHS[digest]
 
 
 #: warnings of a case kept in its record (the rest are counted)
@@ -123,6 +135,7 @@ def run_case(task: CaseTask, furnace: dict[str, Any]) -> dict[str, Any]:
 
 
 def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float) -> None:
+    from twin.furnace.simulated import SimulatedFurnace
     from twin.runs.loop import ClosedLoop
     from twin.scenario import Scenario
 
@@ -130,9 +143,11 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
         cfg, rad, limits, loaded = furnace_of(task.furnace_digest, furnace)
         rec["radiation_loaded"] = loaded
         scenario = Scenario.model_validate_json(task.scenario_json, context={"limits": limits})
+        own = truth_of(task.furnace_digest, cfg) if scenario.truth == "independent" else None
         t1 = time.perf_counter()
         rec["setup_s"] = t1 - t0
-        loop = ClosedLoop(cfg, scenario, rad)
+        loop = ClosedLoop(cfg, scenario, rad, furnace=SimulatedFurnace.for_scenario(cfg, scenario, rad,
+                                                                                      truth_radiation=own))
         t2 = time.perf_counter()
         rec["plan_s"] = t2 - t1
         try:
