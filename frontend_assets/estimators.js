@@ -71,11 +71,11 @@ function tc4Figure() {
   };
 }
 
+const largest = (z) => { let m = 0; for (const row of z) for (const v of row) if (v !== null) m = Math.max(m, Math.abs(v)); return m; };
+
 // The scale: ±(largest |difference|), at least 0.1 K, rounded up to 2 significant digits.
-function symmetricRange(z) {
-  let m = 0;
-  for (const row of z) for (const v of row) if (v !== null) m = Math.max(m, Math.abs(v));
-  m = Math.max(m, 0.1);
+function symmetricRange(big) {
+  const m = Math.max(big, 0.1);
   const step = 10 ** (Math.floor(Math.log10(m)) - 1);
   return Math.ceil(m / step - 1e-9) * step;
 }
@@ -83,11 +83,11 @@ function symmetricRange(z) {
 function deltaFigure() {
   const s = series();
   if (!show("shadow-delta-plot", !!s.shadowDelta)) return null;
-  const fu = state.furnace, z = s.shadowDelta, m = symmetricRange(z);
+  const fu = state.furnace, z = s.shadowDelta, big = largest(z), m = symmetricRange(big);
   const [x0, x1, y0, y1] = fu.fillet;
   const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
   const f = state.lastFrame;
-  $("shadow-delta-sub").textContent = `${f ? `t = ${fmt(f.t)} s · ` : ""}max |Δ| ${fmt(m, m < 1 ? 2 : 1)} K`;
+  $("shadow-delta-sub").textContent = `${f ? `t = ${fmt(f.t)} s · ` : ""}max |Δ| ${fmt(big, big < 1 ? 2 : 1)} K`;
   return {
     data: [
       { type: "heatmap", x: fu.x, y: fu.y, z, colorscale: DIVERGING, zmid: 0, zmin: -m, zmax: m, zsmooth: "best",
