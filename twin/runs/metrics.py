@@ -255,8 +255,11 @@ def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np
         out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
                               for i, name in enumerate(PARAMETERS) if np.isfinite(values[i])}
     if all(f"shadow_{k}" in ts for k in SHADOW_OUTPUTS):
-        shadow = dict(ts)
+        # the run as the shadow saw it: its outputs in place of the primary's, no shadow of its own (else
+        # this would recurse) and not the primary's calibration
+        shadow = {k: v for k, v in ts.items()
+                  if not k.startswith("shadow_") and k not in ("parameters", "parameter_sigma")}
         for k in SHADOW_OUTPUTS:
             shadow[k] = ts[f"shadow_{k}"]
-        out["shadow"] = {k: v for k, v in compute_metrics(shadow).items() if k != "calibration"}
+        out["shadow"] = compute_metrics(shadow)
     return out
