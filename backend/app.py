@@ -30,6 +30,7 @@ from backend.routes import dashboard, docs, exports, files, furnace, glossary, h
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
+    PlantBusy,
     RequestConflict,
     RunIsActive,
     RunManager,
@@ -49,6 +50,7 @@ log = logging.getLogger(__name__)
 ERRORS: dict[type[Exception], int] = {
     RunNotFound: status.HTTP_404_NOT_FOUND,
     RunNotActive: status.HTTP_409_CONFLICT,
+    PlantBusy: status.HTTP_409_CONFLICT,
     RunIsActive: status.HTTP_409_CONFLICT,
     RequestConflict: status.HTTP_409_CONFLICT,
     TooManyRuns: status.HTTP_429_TOO_MANY_REQUESTS,

@@ -5,7 +5,8 @@ estimate), ``field`` (estimated temperature, N_y rows x N_x columns, K), ``tc``,
 (the four TC readings and the estimate there, K), ``u``, ``u_ff`` (six group powers, fractions
 of u_max), ``inhomogeneity`` (K).  Added: ``run_id``, ``seq`` (sample counter), ``wall_time``
 (unix s when the sample was computed, for latency), ``status``, ``events`` (texts of the run's
-events since the previous frame), and from the server (``backend.run_manager``): ``event_log``
+events since the previous frame), ``late_samples`` (samples of a real-time furnace whose readings did
+not all come in time, so far), and from the server (``backend.run_manager``): ``event_log``
 (those events as ``{n, t, text, level}``, ``n`` their index in the run's event list, so a page
 that also read ``GET /api/runs/{id}/series`` shows each one once), ``spread`` (max over the fillet
 |T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).  With a calibrating
@@ -67,6 +68,8 @@ class SnapshotLike(Protocol):
     def shadow_tc_hat(self) -> Any: ...
     @property
     def shadow_field_hat(self) -> Any: ...
+    @property
+    def late_samples(self) -> int: ...
 
 
 def finite_or_none(x: Any) -> float | None:
@@ -124,6 +127,7 @@ def _scalars(s: SnapshotLike) -> dict[str, Any]:
         "inhomogeneity": finite_or_none(s.inhomogeneity),
         "true_mean": finite_or_none(s.true_mean),
         "true_inhomogeneity": finite_or_none(s.true_inhomogeneity),
+        "late_samples": int(s.late_samples),
     }
 
 

@@ -1,5 +1,6 @@
 """The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (the
-twin's and the simulated furnace's own, each loaded once per furnace)."""
+twin's and the simulated furnace's own, each loaded once per furnace), on the scenario's furnace (simulated,
+or over OPC UA with the server's ``opcua`` settings)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import threading
 from typing import Any
 
 from backend.run_worker import LoopLike
+from backend.settings import Settings
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.scenario import OscillationSpec, Reference, Scenario
@@ -16,9 +18,11 @@ log = logging.getLogger(__name__)
 
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (loaded once, lazily)."""
+    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (loaded once, lazily), on the
+    scenario's furnace (:func:`twin.furnace.connect.open_furnace`; one over OPC UA with ``settings.opcua``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, settings: Settings | None = None) -> None:
+        self.settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
         self._truth_radiation: dict[str, Any] = {}
@@ -125,13 +129,27 @@ class DefaultLoopFactory:
         ref = reference_trajectory(scenario.reference, T0)
         plan_estimate(model, cfg, ref, 0.0, t_stop=scenario.duration, budget=budget)
 
+    def check_plant(self, cfg: FurnaceConfig, scenario: Scenario) -> None:
+        """Raise (``ValueError`` / ``OSError`` with a message) if the scenario's furnace cannot be used; for a
+        furnace over OPC UA this connects and finds its nodes, writing nothing (blocking: call it in a thread)."""
+        from twin.furnace.connect import probe_furnace
+
+        probe_furnace(cfg, scenario, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
+
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
-        from twin.furnace.simulated import SimulatedFurnace
+        from twin.furnace.connect import open_furnace
         from twin.runs.loop import ClosedLoop
 
-        # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
         rad = self.radiation(cfg, budget)
-        own = self.truth_radiation(cfg, budget) if scenario.truth == "independent" else None
-        furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
-        loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True, budget=budget)
+        simulated_truth = scenario.plant.kind == "simulated" and scenario.truth == "independent"
+        own = self.truth_radiation(cfg, budget) if simulated_truth else None  # a furnace over OPC UA has no truth
+        furnace = open_furnace(cfg, scenario, rad, truth_radiation=own, opcua=self.settings.opcua,
+                               data_dir=self.settings.data_dir)
+        try:
+            # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
+            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True,
+                                        budget=budget)
+        except BaseException:
+            furnace.close()
+            raise
         return loop

@@ -98,6 +98,7 @@ class RecordingSink:
         self._rows: list[dict[str, Any]] = []
         self._next_image_t = -np.inf
         self._closed = False
+        self._truth = False  # true series declared (a simulated furnace's first sample has them)
         self._log_static(tc_positions)
 
     def _cell(self, x: float, y: float) -> tuple[float, float]:
@@ -126,17 +127,24 @@ class RecordingSink:
             for kind in ("reading", "error"):
                 self.rec.log(f"tc/{kind}/{name}", rr.SeriesLines(names=[name],
                              colors=[palette[i]]), static=True)
-        for name, color in (("T_ref", [0, 0, 0]), ("T_mean_hat", [214, 39, 40]),
-                            ("true_mean", [31, 119, 180])):
+        for name, color in (("T_ref", [0, 0, 0]), ("T_mean_hat", [214, 39, 40])):
             self.rec.log(f"temperature/{name}", rr.SeriesLines(names=[name], colors=[color]), static=True)
         self.rec.log("eta", rr.SeriesLines(names=["eta"]), static=True)
         self.rec.log("inhomogeneity/estimated", rr.SeriesLines(names=["estimated"]), static=True)
+
+    def _declare_truth(self) -> None:
+        """The true series, declared with the first sample that has them (a real furnace never does)."""
+        self._truth = True
+        self.rec.log("temperature/true_mean", rr.SeriesLines(names=["true_mean"], colors=[[31, 119, 180]]),
+                     static=True)
         self.rec.log("inhomogeneity/true", rr.SeriesLines(names=["true"]), static=True)
 
     def add(self, s: SnapshotLike) -> None:
         """Buffer the scalars of one sample; log the field images every ``image_interval`` s."""
         if self._closed:
             return
+        if not self._truth and s.true_mean is not None:
+            self._declare_truth()
         self._rows.append({
             "t": float(s.t), "eta": float(s.eta), "T_ref": float(s.T_ref), "T_mean_hat": float(s.T_mean_hat),
             "true_mean": _float(s.true_mean), "inh": float(s.inhomogeneity),
@@ -174,9 +182,11 @@ class RecordingSink:
         def send(entity: str, values: np.ndarray) -> None:
             self.rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
 
-        for key, entity in (("T_ref", "temperature/T_ref"), ("T_mean_hat", "temperature/T_mean_hat"),
-                            ("true_mean", "temperature/true_mean"), ("eta", "eta"),
-                            ("inh", "inhomogeneity/estimated"), ("inh_true", "inhomogeneity/true")):
+        series = [("T_ref", "temperature/T_ref"), ("T_mean_hat", "temperature/T_mean_hat"), ("eta", "eta"),
+                  ("inh", "inhomogeneity/estimated")]
+        if self._truth:  # a furnace without truth (a real one) gets no true curves
+            series += [("true_mean", "temperature/true_mean"), ("inh_true", "inhomogeneity/true")]
+        for key, entity in series:
             send(entity, np.array([r[key] for r in rows]))
         tc = np.stack([r["tc"] for r in rows])
         tc_err = tc - np.stack([r["tc_hat"] for r in rows])

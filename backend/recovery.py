@@ -13,7 +13,7 @@ from backend.frames import json_safe
 from backend.recording_repair import repair_recording
 from backend.repository import RunRepository
 from backend.run_files import RunFiles, write_json_atomic
-from twin.runs.metrics import compute_metrics
+from twin.runs.metrics import run_metrics
 from twin.runs.record import load_arrays
 from twin.runs.series_store import consolidate, has_parts
 
@@ -39,7 +39,7 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
         if not files.timeseries.is_file():
             continue
         try:
-            metrics = json_safe(compute_metrics(load_arrays(files.timeseries)))
+            metrics = json_safe(run_metrics(load_arrays(files.timeseries)))
         except Exception as exc:  # a file from an older layout: keep the run, say why
             log.warning("run %s: no metrics from %s: %s", run_id, files.timeseries, exc)
             continue

@@ -1,6 +1,7 @@
 """What a scenario or a live change must pass before it reaches a run: the furnace's and this server's
-limits (``twin.limits``), the reachable range, and the reference's feasibility on the model
-(``twin.control.feasibility``, through the loop factory).  Refusals are plain sentences that name the
+limits (``twin.limits``), the reachable range, the reference's feasibility on the model
+(``twin.control.feasibility``, through the loop factory), and for a furnace over OPC UA this server's
+allow-list and a probe of the furnace (:meth:`RunChecks.plant`).  Refusals are plain sentences that name the
 field or the time; feasibility warnings go back to the caller and into the run's events."""
 
 from __future__ import annotations
@@ -52,6 +53,26 @@ class RunChecks:
             problems.append(f"speed: {scenario.speed:g} exceeds this server's limit of {s.max_speed:g}")
         if problems:
             raise LimitExceeded("; ".join(problems))
+        plant = scenario.plant
+        if plant.kind == "opcua":
+            from twin.furnace.connect import EndpointNotAllowed, check_endpoint
+
+            try:
+                check_endpoint(plant.endpoint, s.opcua)
+            except EndpointNotAllowed as exc:
+                raise LimitExceeded(f"plant.endpoint: {exc}") from None
+
+    async def plant(self, scenario: Scenario) -> None:
+        """A furnace over OPC UA reachable with every node the twin needs (the loop factory's ``check_plant``,
+        off the event loop; it writes nothing); :class:`LimitExceeded` naming ``plant.endpoint`` if not."""
+        if scenario.plant.kind == "simulated":
+            return
+        probe = getattr(self.loop_factory, "check_plant", None)
+        if callable(probe):
+            try:
+                await asyncio.to_thread(probe, self.cfg, scenario)
+            except (ValueError, OSError) as exc:
+                raise LimitExceeded(f"plant.endpoint: {exc}") from None
 
     def change_limits(self, value: Reference | OscillationSpec) -> None:
         """Raise :class:`ChangeRejected` if a live change lies outside the furnace's limits."""

@@ -15,7 +15,7 @@ from twin.runs.record import RunEvent
 
 #: what a run's own end is called in its events
 END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
-             "error": "run failed"}
+             "error": "run failed", "plant_lost": "run lost its furnace"}
 
 
 def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
@@ -23,10 +23,12 @@ def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
 
     >>> end_event("stopped", 12.34).text, end_event("error", 3.0, "boom").level
     ('run stopped at t = 12.3 s', 'error')
+    >>> end_event("plant_lost", 40.3, "the link to the furnace was lost").level
+    'error'
     """
     words = END_WORDS.get(status, f"run {status}")
     at = f" at t = {t:.1f} s" if status != "finished" else ""
-    level = "error" if status == "error" else ("warn" if status == "interrupted" else "info")
+    level = "error" if status in ("error", "plant_lost") else ("warn" if status == "interrupted" else "info")
     return RunEvent(float(t), f"{words}{at}{f': {error}' if error else ''}", level)
 
 

@@ -37,6 +37,7 @@ from backend.run_types import (  # noqa: F401  (re-exported: the routes and the 
     InsufficientStorage,
     LimitExceeded,
     LiveSample,
+    PlantBusy,
     RequestConflict,
     RunIsActive,
     RunNotActive,
@@ -51,6 +52,7 @@ from backend.start_requests import RequestReused, StartRequests
 from backend.storage import DataDir, run_bytes
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanCancelled
+from twin.furnace.interface import FurnaceLost
 from twin.limits import ScenarioLimits, scenario_limits
 from twin.scenario import OscillationSpec, Reference, Scenario
 
@@ -90,7 +92,7 @@ class RunManager:
         self.cfg = cfg
         #: every scenario limit and default: the furnace's, within this server's run length and speed
         self.limits = (limits or scenario_limits(cfg)).capped(settings.max_duration_s, settings.max_speed)
-        self.loop_factory: LoopFactory = loop_factory or DefaultLoopFactory()
+        self.loop_factory: LoopFactory = loop_factory or DefaultLoopFactory(settings)
         self._repo = repo
         self._runs: dict[str, ActiveRun] = {}
         self._last_frames: OrderedDict[str, str] = OrderedDict()
@@ -123,6 +125,8 @@ class RunManager:
 
     async def _launch(self, scenario: Scenario) -> Started:
         notes = await self.checks.start(scenario)
+        self._check_plant_free(scenario)
+        await self.checks.plant(scenario)
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
@@ -151,6 +155,16 @@ class RunManager:
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
         return Started(run_id, notes)
+
+    def _check_plant_free(self, scenario: Scenario) -> None:
+        """:class:`PlantBusy` if another run of this server drives the scenario's furnace over OPC UA."""
+        plant = scenario.plant
+        if plant.kind == "simulated":
+            return
+        for run_id, run in self._runs.items():
+            other = run.worker.scenario.plant
+            if other.kind == plant.kind and getattr(other, "endpoint", None) == plant.endpoint:
+                raise PlantBusy(f"run {run_id} already drives the furnace at {plant.endpoint}: stop it first")
 
     def _set_status(self, run_id: str, run: ActiveRun, status: str, error: str | None = None) -> None:
         run.status = status
@@ -224,6 +238,9 @@ class RunManager:
         except PlanCancelled:  # stopped (or shut down) while the first plan was being made
             final = "interrupted" if self._shutting_down else "stopped"
             error = "the server shut down during the run" if self._shutting_down else None
+        except FurnaceLost as exc:  # its data so far is kept (finalize below), the lamps commanded off if possible
+            log.error("run %s: furnace lost: %s", run_id, exc)
+            final, error = "plant_lost", str(exc)
         except Exception as exc:
             log.exception("run %s failed", run_id)
             final, error = "error", f"{type(exc).__name__}: {exc}"

@@ -28,7 +28,11 @@ class InsufficientStorage(RuntimeError):
 
 class LimitExceeded(ValueError):
     """The scenario asks for more than the furnace or the server allows (amplitude, run length, speed,
-    a reference the furnace cannot follow) (422)."""
+    a reference the furnace cannot follow, a furnace over OPC UA it may not or cannot reach) (422)."""
+
+
+class PlantBusy(RuntimeError):
+    """Another run already drives that furnace (409)."""
 
 
 class RunIsActive(RuntimeError):

@@ -4,7 +4,9 @@
 writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its database
 rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
 each call steps the loop as far as the speed allows (real time x factor, or as fast as
-possible) for at most a small wall-time budget and returns the latest snapshot.
+possible) for at most a small wall-time budget and returns the latest snapshot.  A loop on a
+real-time furnace (``paced_by_furnace``) is not paced here: its step waits, in this thread, for the
+furnace's next sample, so the furnace's clock drives the run and the server's event loop never waits.
 Reference / oscillation changes are queued and handed to the loop between two samples, in this
 thread, never on the event loop.  A loop that re-plans in the background returns a future per
 change (``twin.runs.replanning``): the change is ``pending`` until its plan is in force
@@ -39,7 +41,7 @@ from backend.storage import DataDir
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.physics.fillet import Fillet
-from twin.runs.record import RunEvent, event_arrays
+from twin.runs.record import RunEvent, event_arrays, event_level
 from twin.runs.replanning import Superseded
 from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import OscillationSpec, Reference, Scenario, describe
@@ -52,6 +54,9 @@ class LoopLike(Protocol):
 
     @property
     def done(self) -> bool: ...
+
+    @property
+    def paced_by_furnace(self) -> bool: ...  # a real-time furnace: step() waits for its samples
 
     def step(self) -> Any: ...
 
@@ -310,7 +315,7 @@ class RunWorker:
                 wait = 0.02
                 break
             next_t = (float(self.latest.t) if self.latest is not None else 0.0) + t_s
-            if self.speed is not None:
+            if self.speed is not None and not self.loop.paced_by_furnace:
                 due = self._origin_wall + (next_t - self._origin_t) / self.speed
                 wait = due - time.monotonic()
                 if wait > 0:
@@ -324,7 +329,7 @@ class RunWorker:
                 self.recording.add(snap)
             self._add_queued()
             for text in events_of(snap.events):  # the loop put them into its record with the sample
-                self.add_event(float(snap.t), text, "warn" if "failed" in text else "info", in_record=True)
+                self.add_event(float(snap.t), text, event_level(text), in_record=True)
             for event in self._events.saturation.update(float(snap.t), snap.u):
                 self.add_event(event.t, event.text, event.level)
             wait = 0.0

@@ -2,7 +2,10 @@
 
 Every field can be set from the environment, e.g. ``FURNACE_TWIN_API_TOKEN=secret`` or
 ``FURNACE_TWIN_MAX_CONCURRENT_RUNS=3``; ``furnace-twin serve`` passes host, ports and the
-data directory explicitly.  The defaults bind to loopback only.
+data directory explicitly.  The defaults bind to loopback only.  Runs on a furnace over OPC UA take
+their link settings from ``FURNACE_TWIN_OPCUA_*`` (:class:`twin.furnace.opcua.options.OpcUaOptions`:
+allowed endpoints, security, credentials, mapping file, reconnection); their certificates live in
+``<data_dir>/opcua``.
 """
 
 from __future__ import annotations
@@ -12,6 +15,8 @@ from pathlib import Path
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from twin.furnace.opcua.options import OpcUaOptions
 
 DEFAULT_DATA_DIR = Path("furnace-data")
 #: shortest API token accepted (characters): 16 random characters are beyond guessing over HTTP
@@ -64,6 +69,8 @@ class Settings(BaseSettings):
     flush_interval_s: float = Field(2.0, gt=0, description="timeseries / database / recording flush (wall s)")
     recording_image_interval_s: float = Field(0.5, gt=0, description="simulated s between field images in the .rrd")
     change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")
+    opcua: OpcUaOptions = Field(default_factory=OpcUaOptions,
+                                description="furnaces over OPC UA (environment FURNACE_TWIN_OPCUA_*)")
     study_workers: int | None = Field(None, ge=1, le=256,
                                       description="LocalCluster process workers of a study (default: one per core)")
     study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "

@@ -44,9 +44,10 @@ export function noteStatus(status, t) {
   if (!status || status === state.lastStatus) return;
   state.lastStatus = status;
   const run = state.run;
+  const failed = status === "error" || status === "plant_lost"; // plant_lost: the furnace's link was not restored
   if (state.stopping === state.runId && !LIVE.includes(status)) { // the Stop reply, completed
     showMsg(`run ${state.runId} ${status}${t !== null && t !== undefined ? ` at t = ${fmt(t)} s` : ""}; its data is kept`);
     state.stopping = null;
   }
-  if (status === "error" && run && run.error) showMsg(`run ${run.id} failed: ${run.error}`, true);
+  if (failed && run && run.error) showMsg(`run ${run.id} ${status === "plant_lost" ? "lost its furnace" : "failed"}: ${run.error}`, true);
 }

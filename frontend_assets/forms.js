@@ -29,11 +29,17 @@ export function scenarioFromForm(form = $("start-form")) {
   const n = (name) => readNumber(el(name));
   const reference = refMode("refmode") === "points" ? { points: parsePoints(el("points").value, pointLimits()) }
     : { setpoint: n("setpoint"), t_E: n("t_E") };
-  return {
+  const common = {
     reference,
     duration: n("duration"),
     oscillation: { enabled: el("osc").checked, amplitude: n("amplitude"), period: n("period") },
     tc4: [n("tc4x"), n("tc4y")],
+  };
+  if (refMode("plant") === "opcua") { // a real furnace: its own clock (speed 1), noise and deviations; no truth
+    return { ...common, plant: { kind: "opcua", endpoint: el("endpoint").value.trim() } };
+  }
+  return {
+    ...common,
     speed: readSpeed(el("speed")),
     mismatch: { emissivity: n("m_eps"), alpha: n("m_alpha"), lamp_efficiency: n("m_lamp") },
     tc_noise: n("tc_noise"),
@@ -149,7 +155,7 @@ export function wireForms() {
     setToken(ev.target.value.trim());
     ev.target.classList.remove("need");
   });
-  for (const name of ["refmode", "live-refmode"]) {
+  for (const name of ["refmode", "live-refmode", "plant"]) {
     for (const el of document.querySelectorAll(`input[name="${name}"]`)) el.addEventListener("change", () => showRefMode(name));
     showRefMode(name);
   }

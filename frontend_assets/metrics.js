@@ -41,7 +41,10 @@ export function metricsTable(run) {
   const m = run.metrics;
   if (!m) return `<div class="note">metrics when the run ends · ${esc(windowNote(run))}</div>`;
   const scale = scaleOf(run), shadow = m.shadow && typeof m.shadow === "object" ? m.shadow : null;
-  const rows = keys().filter((k) => k in m).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
+  // a furnace over OPC UA has no truth: no rows for the true_* and field-estimation metrics (always null)
+  const noTruth = run.scenario.plant && run.scenario.plant.kind === "opcua";
+  const shown = (k) => k in m && !(noTruth && (k.startsWith("true_") || k.startsWith("field_estimation")));
+  const rows = keys().filter(shown).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
     + `<td class="num">${kelvin(m[k], scale)}</td><td class="num">${percent(m[k])}</td>`
     + `${shadow ? `<td class="num">${percent(shadow[k])}</td>` : ""}</tr>`).join("");
   const shadowHead = shadow ? '<th class="num" title="the same metric of the shadow estimator">shadow %</th>' : "";

@@ -32,6 +32,17 @@ function fileLinks(run) {
   return links.join(" ");
 }
 
+// The furnace of a run over OPC UA, with the samples that came late (live from the stream, else the metrics);
+// a simulated one: its speed, noise, seed and truth.
+function describeFurnace(run) {
+  const sc = run.scenario, plant = sc.plant || { kind: "simulated" };
+  if (plant.kind !== "opcua") return `speed ${esc(sc.speed)} · noise ${sc.tc_noise} K · seed ${sc.seed}${sc.truth ? ` · truth ${esc(sc.truth)}` : ""}`;
+  const frame = state.lastFrame && state.lastFrame.late_samples !== undefined ? state.lastFrame : null;
+  const late = frame ? frame.late_samples : (run.metrics || {}).late_samples;
+  return `furnace over OPC UA <span class="id">${esc(plant.endpoint)}</span> (real time, no truth)`
+    + `${late !== undefined && late !== null ? ` · ${late} late samples` : ""}`;
+}
+
 function renderRunInfo(run) {
   const sc = run.scenario;
   const now = LIVE.includes(run.status) ? "now" : "at the end";
@@ -42,7 +53,7 @@ function renderRunInfo(run) {
     <div>reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})</div>
     ${sc.estimator ? `<div class="muted">estimator ${esc(describeChoice(sc.estimator))}${sc.estimator.shadow
     ? ` · shadow ${esc(describeChoice(sc.estimator.shadow))}` : ""}</div>` : ""}
-    <div class="muted">${sc.duration} s · speed ${esc(sc.speed)} · TC4 at (${sc.tc4.join(", ")}) · noise ${sc.tc_noise} K · seed ${sc.seed}
+    <div class="muted">${sc.duration} s · TC4 at (${sc.tc4.join(", ")}) · ${describeFurnace(run)}
       · <button class="link" id="reuse-btn" title="copy this run's scenario into the New run form">use as new run</button></div>`;
   $("run-files").innerHTML = fileLinks(run);
   $("run-metrics").innerHTML = metricsTable(run);
@@ -56,7 +67,11 @@ function reuseScenario(sc) {
   for (const el of form.elements.refmode) { el.checked = el.value === (points ? "points" : "transition"); el.dispatchEvent(new Event("change")); }
   if (points) form.elements.points.value = sc.reference.points.map(([t, T]) => `${t}, ${T}`).join("\n");
   else { set("setpoint", sc.reference.setpoint); set("t_E", sc.reference.t_E); }
-  set("duration", sc.duration); set("speed", sc.speed); form.elements.osc.checked = sc.oscillation.enabled;
+  const plant = sc.plant || { kind: "simulated" };
+  for (const el of form.elements.plant) { el.checked = el.value === plant.kind; el.dispatchEvent(new Event("change")); }
+  if (plant.kind === "opcua") set("endpoint", plant.endpoint);
+  else { set("speed", sc.speed); if (sc.truth) set("truth", sc.truth); }
+  set("duration", sc.duration); form.elements.osc.checked = sc.oscillation.enabled;
   set("amplitude", sc.oscillation.amplitude); set("period", sc.oscillation.period); set("tc4x", sc.tc4[0]); set("tc4y", sc.tc4[1]);
   set("tc_noise", sc.tc_noise); set("seed", sc.seed); set("m_eps", sc.mismatch.emissivity); set("m_alpha", sc.mismatch.alpha);
   set("m_lamp", sc.mismatch.lamp_efficiency);

@@ -7,10 +7,11 @@ import { state } from "./state.js";
 let tableHtml = null, pickHtml = null;
 let onCompare = () => {};
 let onShow = () => {};
+const overOpcUa = (r) => !!(r.scenario.plant && r.scenario.plant.kind === "opcua");
 
 const matches = (r, words) => {
   const text = `${r.label || ""} ${r.id} ${r.status} ${shortReference(r.scenario.reference)} `
-    + `${r.scenario.oscillation.enabled ? "oscillating osc" : "fixed"}`.toLowerCase();
+    + `${r.scenario.oscillation.enabled ? "oscillating osc" : "fixed"} ${overOpcUa(r) ? `opc ua ${r.scenario.plant.endpoint}` : "simulated"}`;
   return words.every((w) => text.toLowerCase().includes(w));
 };
 
@@ -23,7 +24,7 @@ function row(r) {
     <td class="label"><button class="name" title="show this run">${esc(r.label || "(no label)")}</button>
       <button class="link edit" title="edit the label">✎</button><br><span class="id">${esc(r.id)}</span></td>
     <td title="${esc(when.toLocaleString())}">${esc(when.toLocaleDateString())} ${esc(when.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" }))}</td>
-    <td>${esc(shortReference(r.scenario.reference))}</td>
+    <td>${esc(shortReference(r.scenario.reference))}${overOpcUa(r) ? `<br><span class="id" title="${esc(r.scenario.plant.endpoint)}">OPC UA</span>` : ""}</td>
     <td>${r.scenario.oscillation.enabled ? `on ${fmt(1000 * r.scenario.oscillation.amplitude, 0)} mm` : "off"}</td>
     <td><span class="badge ${esc(r.status)}">${esc(r.status)}</span></td>
     <td class="num">${pct(m.mean_error_steady_max)} %</td><td class="num">${pct(m.tc4_error_steady_max)} %</td>

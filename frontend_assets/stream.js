@@ -14,7 +14,7 @@ export function applyFrame(f) {
   state.lastFrame = f;
   state.frames += 1;
   pushFrame(state.series, f);
-  $("run-clock").textContent = `t = ${fmt(f.t)} s`;
+  $("run-clock").textContent = `t = ${fmt(f.t)} s${f.late_samples ? ` · ${f.late_samples} late` : ""}`;
   addEvents(f.event_log);
   if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
   if (f.status && !LIVE.includes(f.status)) noteStatus(f.status, f.t);

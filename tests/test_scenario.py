@@ -22,6 +22,7 @@ def test_defaults_are_the_product_contract():
         "tc_noise": 1.0,
         "seed": 0,
         "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
+        "plant": {"kind": "simulated"},  # product.md, "More scenario fields"
     }
     with pytest.raises(ValidationError, match="truth"):
         Scenario.model_validate({"truth": "model"})

@@ -1,4 +1,5 @@
-"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, study.
+"""The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, study,
+emulate.
 
 Each sub-command lives in its own module and is imported only when used, so
 ``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
@@ -88,6 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--hil", action="store_true",
+                   help="instead: hardware-in-the-loop timing against furnace-twin emulate (real time)")
+    s.add_argument("--duration", type=float, default=300.0, help="--hil: seconds of real time (default 300)")
+
+    s = sub.add_parser("emulate", help="the simulated furnace served in real time over OPC UA (hardware in the loop)")
+    from twin.furnace.emulator.command import add_arguments as emulate_arguments
+
+    emulate_arguments(s)
 
     s = sub.add_parser("study", help="a design study (grid and/or Monte Carlo of runs) on Dask distributed")
     s.add_argument("file", help="study TOML file (product.md: furnace, [base], [grid], [monte_carlo])")
@@ -123,6 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    if not args.verbose:  # asyncua reports every node it creates and every session at INFO
+        logging.getLogger("asyncua").setLevel(logging.WARNING)
     from twin.config import CONFIG_ENV_VAR, ConfigError, load_config
 
     try:
@@ -155,6 +166,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.runs.bench import bench_command
 
             return bench_command(cfg, args)
+        if args.command == "emulate":
+            from twin.furnace.emulator.command import emulate_command
+
+            return emulate_command(cfg, args)
         if args.command == "study":
             from twin.studies.command import study_command
 

@@ -195,6 +195,34 @@ class EstimatorSpec(EstimatorChoice):
     shadow: EstimatorChoice | None = Field(None, description="a second estimator to compare, or null")
 
 
+class SimulatedPlant(_Model):
+    """The run's furnace is simulated in process (``SimulatedFurnace``): any speed."""
+
+    kind: Literal["simulated"] = "simulated"
+
+
+class OpcUaPlant(_Model):
+    """A furnace over OPC UA (a real one, or ``furnace-twin emulate``): real time only.
+
+    Which endpoints a server may connect to, and with which security, is the server's setting
+    (``FURNACE_TWIN_OPCUA_*``), never the scenario's.
+    """
+
+    kind: Literal["opcua"]
+    endpoint: str = Field("opc.tcp://127.0.0.1:4840/furnace-twin/", max_length=512,
+                          description="opc.tcp://host:port/path")
+
+    @field_validator("endpoint")
+    @classmethod
+    def _endpoint(cls, v: str) -> str:
+        from twin.furnace.opcua.endpoints import parse_endpoint
+
+        return parse_endpoint(v).url
+
+
+Plant = Annotated[SimulatedPlant | OpcUaPlant, Field(discriminator="kind")]
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: Num = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
@@ -209,18 +237,29 @@ class Scenario(_Model):
     truth: lim.TruthKind = Field(
         lim.TRUTH_DEFAULT,
         description="'independent': the simulated furnace differs from the twin's model as its furnace file's "
-        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors",
+        "[truth] says (mismatch adds to it); 'shared': the plant on the model's own tables, ideal sensors. "
+        "A simulated plant only: a furnace over OPC UA has no truth and ignores it",
     )
+    plant: Plant = Field(default_factory=SimulatedPlant, description="the furnace: simulated, or over OPC UA")
 
     @model_validator(mode="before")
     @classmethod
     def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
-        """With a furnace's limits, what is left out takes its defaults (nested models too)."""
+        """With a furnace's limits, what is left out takes its defaults (nested models too).  A furnace over
+        OPC UA runs at real time: its speed defaults to 1."""
+        if isinstance(data, dict) and isinstance(data.get("plant"), dict) and data["plant"].get("kind") == "opcua":
+            data = {"speed": 1.0, **data}
         given = _context_limits(info)
         if given is not None and isinstance(data, dict):
             return {"reference": {}, "oscillation": {}, "tc4": given.tc4, "tc_noise": given.tc_noise.default,
                     **data}
         return data
+
+    @model_validator(mode="after")
+    def _speed_of_plant(self) -> Scenario:
+        if self.plant.kind == "opcua" and self.speed != 1.0:
+            raise ValueError(f"speed: a furnace over OPC UA runs in real time; speed must be 1 (got {self.speed!r})")
+        return self
 
     @field_validator("tc4")
     @classmethod

@@ -89,6 +89,9 @@ def glossary(cfg: FurnaceConfig) -> dict[str, Any]:
         "calibration": "calibration: how much the furnace differs from the twin's model as the estimator learns "
                        "it, in % (-10 % = lamps 10 % weaker than the model); the band is +-1 standard deviation. "
                        "Effective values: they also absorb what the model gets wrong in other ways.",
+        "plant": "the furnace of a run: simulated in process (any speed, its noise, seed, deviations and truth), or a "
+                 "furnace over OPC UA (a real one, or furnace-twin emulate): real time on its clock, no truth, samples "
+                 "that come late counted. The server connects only to the endpoints its settings allow.",
     }
     return {"metrics": {k: {"name": n, "meaning": m} for k, (n, m) in METRIC_WORDS.items()}, "terms": terms,
             "groups": groups}

@@ -58,9 +58,11 @@ def summary(row: RunRow, manager: RunManager, *, whole: bool = True) -> RunSumma
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=RunCreated, dependencies=[TokenDep],
              responses={200: {"description": "a repeated Idempotency-Key: the run the first request started"},
-                        409: {"description": "the Idempotency-Key was used for another scenario"},
-                        422: {"description": "invalid scenario, over the furnace's or the server's limits, or a "
-                                             "reference this furnace cannot follow by a wide margin"},
+                        409: {"description": "the Idempotency-Key was used for another scenario, or another run "
+                                             "already drives that furnace"},
+                        422: {"description": "invalid scenario, over the furnace's or the server's limits, a "
+                                             "reference this furnace cannot follow by a wide margin, or a "
+                                             "furnace over OPC UA it may not or cannot reach"},
                         429: {"description": "too many runs at once"}})
 async def start_run(
     manager: ManagerDep, scenario: ScenarioBody, response: Response,

@@ -60,6 +60,8 @@ class FakeLoop:
             t_E=float(ref.t_E), setpoint=float(ref.setpoint), group_names=tuple(g.name for g in self.cfg.lamps.groups),
             scenario=self.scenario.to_json()))
 
+    paced_by_furnace = False  # a simulation: the worker paces it by its speed
+
     @property
     def done(self) -> bool:
         return self.t >= self.scenario.duration - 1e-9

@@ -6,6 +6,7 @@ for its token.  Each test starts (and stops) the runs it needs.  Screenshots: te
 
 from __future__ import annotations
 
+import socket
 import time
 
 import httpx
@@ -280,6 +281,40 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
         _wait_text(page, "#ctl-msg", "; its data is kept", timeout=30_000)
         assert not errors, errors
         page.close()
+
+
+def test_dashboard_starts_an_opcua_run_only_where_allowed(server, browser, artifacts) -> None:
+    """The form's furnace choice: OPC UA shows the endpoint and hides what only a simulation has (speed,
+    noise, seed, deviations); an endpoint the server may not, or cannot, reach is refused on the message line."""
+    page, errors = _open_dashboard(browser, server.url)
+    n_runs = len(httpx.get(f"{server.url}/api/runs", timeout=10).json())
+    assert not page.is_visible("input[name=endpoint]") and page.is_visible("input[name=speed]")
+    page.check("input[name=plant][value=opcua]")
+    assert page.is_visible("input[name=endpoint]")
+    for hidden in ("speed", "tc_noise", "seed", "m_eps"):
+        assert not page.is_visible(f"input[name={hidden}]"), hidden
+    # a furnace over OPC UA has no truth (issue 10's choice applies to the simulation only)
+    assert not page.is_visible("select[name=truth]") and not page.is_visible("details.more")
+    body = _js(page, "import('/assets/forms.js').then((m) => m.scenarioFromForm())")
+    assert body["plant"]["kind"] == "opcua" and not {"truth", "speed", "seed", "tc_noise", "mismatch"} & set(body)
+    page.fill("input[name=endpoint]", "opc.tcp://10.9.9.9:4840/furnace-twin/")
+    page.click("#start-btn")
+    _wait_text(page, "#start-msg", "FURNACE_TWIN_OPCUA_ENDPOINTS")
+    assert _js(page, "document.getElementById('start-msg').className") == "msg err"  # the 422's sentence
+    # the feasibility preview (POST /api/feasibility) refuses the same endpoint before any start
+    _wait_text(page, "#feasibility", "FURNACE_TWIN_OPCUA_ENDPOINTS")
+    with socket.socket() as s:  # bound, not listening: nothing answers there
+        s.bind(("127.0.0.1", 0))
+        page.fill("input[name=endpoint]", f"opc.tcp://127.0.0.1:{s.getsockname()[1]}/furnace-twin/")
+        page.click("#start-btn")
+        _wait_text(page, "#start-msg", "connection refused")
+    page.screenshot(path=str(artifacts / "dashboard-opcua-refused.png"))
+    assert len(httpx.get(f"{server.url}/api/runs", timeout=10).json()) == n_runs  # nothing was started
+    page.check("input[name=plant][value=simulated]")
+    assert page.is_visible("input[name=speed]") and not page.is_visible("input[name=endpoint]")
+    assert page.is_visible("select[name=truth]") and page.is_visible("details.more")
+    assert not errors, errors
+    page.close()
 
 
 # ---- the dashboard for daily use (issue 16): history on reload, comparison, double click ----

@@ -178,7 +178,7 @@ def test_glossary_explains_every_metric_and_term(tmp_path, small_cfg) -> None:
     with make_client(tmp_path, small_cfg) as c:
         g = c.get("/api/glossary").json()
     assert set(g["metrics"]) == set(METRIC_KEYS) and all(m["name"] and m["meaning"] for m in g["metrics"].values())
-    for term in ("fillet", "t_E", "eta", "u_ff", "groups", "T_sup", "spread", "windows", "tc4", "saturation"):
+    for term in ("fillet", "t_E", "eta", "u_ff", "groups", "T_sup", "spread", "windows", "tc4", "saturation", "plant"):
         assert len(g["terms"][term]) > 40, term
     for group in small_cfg.lamps.groups:
         assert group.name in g["terms"]["groups"] and group.name in g["groups"]

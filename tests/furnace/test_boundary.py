@@ -29,10 +29,30 @@ def test_the_twin_side_never_imports_the_simulated_furnace() -> None:
     assert not [m for m in loaded if m.startswith("twin.furnace.simulated")], loaded
 
 
+def test_the_opcua_adapter_needs_no_simulation() -> None:
+    """The plant adapter is the furnace side of a real installation: it never loads the simulated furnace."""
+    code = ("import json, sys\nimport twin.furnace.opcua.furnace, twin.furnace.connect\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('twin.furnace'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = json.loads(out.strip().splitlines()[-1])
+    assert "twin.furnace.opcua.furnace" in loaded
+    assert not [m for m in loaded if m.startswith(("twin.furnace.simulated", "twin.furnace.emulator"))], loaded
+
+
+def test_a_simulated_sample_read_again_is_the_same(small_radiation) -> None:
+    """The loop reads t = 0 twice (initial estimate, first step): the same readings, no new noise draw."""
+    f = SimulatedFurnace(small_config(), small_radiation, tc_noise=2.0, seed=3)
+    first, again = f.read(0.0), f.read(0.0)
+    assert np.array_equal(first.values, again.values)
+    f.apply(np.zeros(6), 0.0)
+    assert not np.array_equal(f.read(0.1).values, first.values)
+
+
 class _RealLike:
     """A furnace as a real one looks to the loop: no true field, TC2 lost from 1 s on."""
 
     kind = "test"
+    realtime = False
 
     def __init__(self, inner: SimulatedFurnace) -> None:
         self.inner = inner
@@ -57,6 +77,9 @@ class _RealLike:
 
     def true_field(self):
         return None
+
+    def drain_events(self):
+        return ()
 
     def close(self) -> None:
         self.inner.close()
@@ -92,6 +115,13 @@ def test_missing_readings_are_recorded_as_nan_and_left_out_of_the_update(truthle
     lost = [s for s in snaps if s.t >= 1.0 - 1e-9]
     assert lost and all(np.isnan(s.tc[1]) and np.isfinite(s.tc[[0, 2, 3]]).all() for s in lost)
     assert not loop.estimator.last_info.used[1] and loop.estimator.last_info.used[[0, 2]].all()
+    # each such sample counts as late, in the snapshots, the stored status and the metrics
+    assert [s.late_samples for s in lost] == list(range(1, len(lost) + 1)) and loop.late_samples == len(lost)
+    status = loop.timeseries()["tc_status"]
+    assert status.shape == (len(snaps), 4) and (status[-len(lost):, 1] == 2).all() and (status[:-len(lost)] == 0).all()
+    assert loop.metrics()["late_samples"] == len(lost)
+    events = [e for s in snaps for e in s.events]
+    assert sum("late: no TC2 in time" in e for e in events) == 1  # one event when the run of late samples starts
     # the run still tracks its reference with two TCs (the mean error stays within a few kelvin)
     assert abs(snaps[-1].T_mean_hat - snaps[-1].T_ref) < 20.0
 

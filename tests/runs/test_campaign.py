@@ -24,7 +24,7 @@ import pytest
 
 from twin.config import load_config, small_config
 from twin.runs.campaign import PAPER, TC4_POSITIONS, campaign_scenarios, campaign_table, run_campaign, worst
-from twin.runs.metrics import METRIC_KEYS, compute_metrics
+from twin.runs.metrics import METRIC_KEYS, run_metrics
 from twin.runs.model_error import MODEL_ERROR_KEYS
 
 EXPECTED = Path(__file__).with_name("campaign_expected.json")
@@ -84,7 +84,7 @@ def test_reduced_campaign_writes_every_seed(campaign):
                 ts = dict(npz)
             assert ts["t"][-1] == 2 * T_E
             # the reported figures are those of the stored run (recomputed from its time series)
-            again = compute_metrics(ts)
+            again = run_metrics(ts)  # the error metrics and late_samples
             for k, v in saved.items():
                 if isinstance(v, dict):  # calibration: {name: {value, sigma}}
                     assert again[k] == v, (e["name"], k)

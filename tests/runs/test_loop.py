@@ -11,7 +11,7 @@ import pytest
 
 from twin.config import small_config
 from twin.runs.loop import ClosedLoop
-from twin.runs.metrics import compute_metrics
+from twin.runs.metrics import run_metrics
 from twin.runs.runner import execute_run
 from twin.scenario import PAPER_ESTIMATOR, OscillationSpec, Scenario, TransitionReference
 
@@ -73,7 +73,7 @@ def test_metrics_are_recomputable_from_the_saved_series(tmp_path, small_radiatio
     result = execute_run(loop, tmp_path, figures=True)
     saved = json.loads((tmp_path / "metrics.json").read_text())
     with np.load(tmp_path / "timeseries.npz") as ts:
-        again = compute_metrics(dict(ts))
+        again = run_metrics(dict(ts))  # the error metrics and late_samples
         assert ts["field_hat"].shape[1:] == (17, 26) and ts["u"].shape[1] == 6
         assert json.loads(str(ts["scenario"]))["duration"] == 20.0
     def same(a, b, key):  # nested metrics (calibration, shadow) compared entry by entry

@@ -14,6 +14,12 @@ t_j = j t_s it
 field (:meth:`Furnace.true_field`); a real one (over OPC UA) returns ``None`` there, and
 everything downstream (metrics, stream, recording, both UIs) handles its absence.
 
+A simulated furnace keeps no clock of its own: it moves on when the loop applies the next input, so a run
+goes as fast as the loop (or as a speed paces it).  A real-time furnace (:attr:`Furnace.realtime`, e.g.
+:class:`twin.furnace.opcua.OpcUaFurnace`) has its own clock: :meth:`Furnace.read` waits for the sample,
+and one that comes too late is ``missing``.  Its first ``read(0.0)`` after the loop is set up starts
+the run's clock.  A furnace that cannot be reached any more raises :class:`FurnaceLost`.
+
 The twin's side (``twin.model``, ``twin.estimation``, ``twin.control``) never imports an
 implementation: it gets readings and gives powers.
 
@@ -42,6 +48,10 @@ Array = NDArray[np.float64]
 #: "missing": no reading arrived for this sample (late or lost).
 TCStatus = Literal["good", "bad", "missing"]
 N_ESTIMATOR_TCS = 3  # TC1..TC3 feed the EKF; TC4 only validates (paper section 3.2)
+
+
+class FurnaceLost(RuntimeError):
+    """The furnace cannot be reached any more (its link was not restored in time); the run ends ``plant_lost``."""
 
 
 @dataclass(frozen=True)
@@ -98,6 +108,11 @@ class Furnace(Protocol):
         ...
 
     @property
+    def realtime(self) -> bool:
+        """The furnace runs on its own clock: :meth:`read` waits for the sample, and runs go at real time."""
+        ...
+
+    @property
     def tc_positions(self) -> Array:
         """(4, 2) absolute positions (m) of TC1..TC4 on the specimen."""
         ...
@@ -120,6 +135,10 @@ class Furnace(Protocol):
 
     def true_field(self) -> Array | None:
         """The true cell temperatures (N_s,) K at the last read sample; ``None`` if unknown (a real furnace)."""
+        ...
+
+    def drain_events(self) -> tuple[str, ...]:
+        """What the furnace reported since the last call (a link lost or restored), for the run's events."""
         ...
 
     def close(self) -> None:

@@ -17,6 +17,14 @@ Per sample j (t_j = j t_s), following the paper's order (eqs. 13, 17, 25, 14):
 Each call of :meth:`ClosedLoop.step` returns an immutable :class:`Snapshot` of
 sample j.  Runs are deterministic for a seed.
 
+A real-time furnace (:attr:`twin.furnace.interface.Furnace.realtime`, one over OPC UA) paces the loop:
+reading the TCs waits in the furnace's ``read`` for the sample (never on a server's event loop: the caller's thread
+waits).  A sample whose readings did not all come in time (status "missing") is *late*: the EKF
+updates with what came, or only predicts; late samples are counted (:attr:`ClosedLoop.late_samples`,
+``Snapshot.late_samples``) and reported as events when a run of them starts and ends.  The first
+``read(0.0)`` at construction gives the initial estimate; the first step reads t = 0 again, which
+starts a real-time furnace's clock after the (seconds-long) first plan.
+
 Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillation`) are
 re-planned (feedforward, reference state, gains, model) from the current estimate, in a
 background thread when ``background=True`` (the backend) so the loop never stalls, and take
@@ -117,6 +125,9 @@ class ClosedLoop:
         self.n_steps = int(round(scenario.duration / self.t_s))
         self.radiation: Any = radiation if radiation is not None else radiation_model(cfg)
         if furnace is None:
+            if scenario.plant.kind != "simulated":
+                raise ValueError(f"a scenario with a {scenario.plant.kind} plant needs its furnace passed "
+                                 "(twin.furnace.open_furnace)")
             from twin.furnace.simulated import SimulatedFurnace
 
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
@@ -127,14 +138,16 @@ class ClosedLoop:
         self._replanner = Replanner(background, budget)
         self._events: list[str] = []
         self._oscillation = scenario.oscillation
+        #: samples with a reading that did not come in time (a real-time furnace); ``_late_run`` the current run
+        self.late_samples = 0
+        self._late_run = 0
         # a change waiting for its plan: (spec, T_ref(t)) and the oscillation, in force when it is installed
         self._wanted_reference: tuple[Reference, Callable[[Any], Any]] | None = None
         self._wanted_oscillation: OscillationSpec | None = None
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
-        self._readings: Readings | None = furnace.read(0.0)
-        y0 = self._readings.for_estimator()
+        y0 = furnace.read(0.0).for_estimator()
         T0 = float(np.nanmean(y0)) if np.isfinite(y0).any() else float(cfg.specimen.initial_temperature)
         theta0 = np.full(len(cfg.fe.x_nodes) * len(cfg.fe.y_nodes), T0)
         self._reference_spec: Reference = scenario.reference
@@ -294,6 +307,11 @@ class ClosedLoop:
         return self.j > self.n_steps
 
     @property
+    def paced_by_furnace(self) -> bool:
+        """The furnace keeps real time: :meth:`step` waits for its samples (no speed applies)."""
+        return bool(self.furnace.realtime)
+
+    @property
     def replanning(self) -> bool:
         """A re-plan is being solved in the background (it is swapped in at the next sample when done)."""
         return self._replanner.solving
@@ -302,11 +320,13 @@ class ClosedLoop:
         """Advance one sample; return the snapshot of sample j (before the furnace moves on)."""
         if self.done:
             raise StopIteration("run finished")
+        # a real-time furnace waits here for its sample: outside the lock, so readers are not held up
+        readings = self.furnace.read(self.j * self.t_s)
         with self._lock:
             self._replanner.poll()
             j, t = self.j, self.j * self.t_s
-            readings = self._readings if self._readings is not None else self.furnace.read(t)
-            self._readings = None
+            self._note_lateness(readings, t)
+            self._events.extend(self.furnace.drain_events())
             eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
             holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
@@ -330,7 +350,8 @@ class ClosedLoop:
                 inhomogeneity=float(self.fillet.sup(field_hat, T_ref)),
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
-                events=events, **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
+                events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
+                **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
             problem = self._guard.check(snap)
             if problem is not None:  # nothing of this sample reaches the furnace or the record
@@ -345,6 +366,20 @@ class ClosedLoop:
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap
+
+    def _note_lateness(self, readings: Readings, t: float) -> None:
+        """Count a sample with missing readings; an event when a run of late samples starts and ends."""
+        missing = [f"TC{i + 1}" for i, st in enumerate(readings.status) if st == "missing"]
+        if missing:
+            self.late_samples += 1
+            self._late_run += 1
+            if self._late_run == 1:
+                self._events.append(f"sample at t = {t:.1f} s late: no {', '.join(missing)} in time "
+                                    "(the EKF predicts without them)")
+        elif self._late_run:
+            self._events.append(f"samples on time again at t = {t:.1f} s after {self._late_run} late "
+                                f"({self.late_samples} in this run)")
+            self._late_run = 0
 
     def run(self) -> Iterator[Snapshot]:
         while not self.done:

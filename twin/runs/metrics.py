@@ -19,7 +19,9 @@ and the fillet mean the area integral over the fillet, both from
 :class:`twin.physics.fillet.Fillet` on the stored field grid, so that :func:`compute_metrics`
 applied to a saved ``timeseries.npz`` (:mod:`twin.runs.record`) gives exactly the published
 ``metrics.json``.  A run without a true field (a real furnace) reports NaN (JSON null) for the
-``true_*`` and field-estimation metrics.
+``true_*`` and field-estimation metrics.  :func:`late_samples` counts the samples with a reading that did
+not come in time (a real-time furnace; ``tc_status`` code 2), 0 for a simulation; a run's metrics
+(:meth:`twin.runs.record.RunRecord.metrics`) carry it beside the error metrics.
 
 Example
 -------
@@ -263,3 +265,16 @@ def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np
             shadow[k] = ts[f"shadow_{k}"]
         out["shadow"] = compute_metrics(shadow)
     return out
+
+
+def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
+    """What a run reports: :func:`compute_metrics` and ``late_samples`` (as a float, like the others)."""
+    return {**compute_metrics(ts), "late_samples": float(late_samples(ts))}
+
+
+def late_samples(ts: Mapping[str, Any]) -> int:
+    """Samples with a missing (late or lost) TC reading, from ``tc_status`` (0 if the series is absent)."""
+    from twin.runs.record import TC_STATUS_CODES
+
+    status = np.asarray(ts.get("tc_status", np.zeros((0, 4))))
+    return int(np.any(status == TC_STATUS_CODES["missing"], axis=-1).sum()) if status.size else 0

@@ -4,7 +4,8 @@ A :class:`Snapshot` is one sample of a closed-loop run; a :class:`RunRecord` col
 growing arrays and writes them in the ``timeseries.npz`` layout:
 
 * per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
-  ``u``, ``u_ff`` (n, 6) fractions of u_max;
+  ``u``, ``u_ff`` (n, 6) fractions of u_max; ``tc_status`` (n, 4) int8, :data:`TC_STATUS_CODES` of each
+  reading (0 good, 1 bad, 2 missing: late or lost);
 * fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
   only when the furnace is a simulation (a real furnace has no true field);
 * with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
@@ -42,6 +43,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -58,6 +60,8 @@ FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
 #: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
 #: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
 OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
+#: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
+TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 EVENT_LEVELS = ("info", "warn", "error")
 
 
@@ -78,6 +82,20 @@ class RunChange:
     t: float
     kind: str
     body: dict[str, Any]
+
+
+def event_level(text: str) -> str:
+    """The level of one of the loop's own reports: ``warn`` for a failure (a re-plan that failed), a late
+    sample or a lost link to the furnace, else ``info``.
+
+    >>> event_level("re-planning failed (reference not applied): no solution"), event_level("re-planned (x): ok")
+    ('warn', 'info')
+    >>> event_level("sample at t = 3.0 s late: no TC1 in time (the EKF predicts without them)")
+    'warn'
+    >>> event_level("link to the furnace restored after 1.2 s")
+    'info'
+    """
+    return "warn" if re.search(r"failed| late:|\blost\b", text) else "info"
 
 
 def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:
@@ -142,6 +160,8 @@ class Snapshot:
     shadow_T_mean_hat: float | None = None  # the shadow estimator's fillet mean, TCs and field
     shadow_tc_hat: Array | None = None
     shadow_field_hat: Array | None = None
+    tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
+    late_samples: int = 0  # samples of the run so far with a reading that did not come in time
 
 
 @dataclass(frozen=True)
@@ -223,6 +243,7 @@ class RunRecord:
     def append(self, snap: Snapshot) -> None:
         """Add one sample (its events too)."""
         values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
+        values["tc_status"] = [TC_STATUS_CODES[st] for st in snap.tc_status] if snap.tc_status else [0] * len(snap.tc)
         values["field_hat"] = snap.field_hat
         if self.has_truth:
             if snap.field_true is None:
@@ -237,11 +258,11 @@ class RunRecord:
             values[k] = v
         if not self._columns:
             for k, v in values.items():
-                dtype = np.float32 if k in FIELD_SERIES else float
+                dtype = np.float32 if k in FIELD_SERIES else (np.int8 if k == "tc_status" else float)
                 self._columns[k] = _Column(np.shape(v), dtype)
         for k, v in values.items():
             self._columns[k].append(v)
-        self._events.extend(RunEvent(float(snap.t), str(e)) for e in snap.events)
+        self._events.extend(RunEvent(float(snap.t), str(e), event_level(str(e))) for e in snap.events)
 
     def note_change(self, t: float, kind: str, body_json: str) -> None:
         """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``."""
@@ -255,6 +276,8 @@ class RunRecord:
         for k in SAMPLE_SERIES:
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros(0)
+        col = self._columns.get("tc_status")
+        out["tc_status"] = col.view().copy() if col is not None else np.zeros((0, 4), np.int8)
         for k in FIELD_SERIES:
             if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
@@ -306,10 +329,10 @@ class RunRecord:
         return out
 
     def metrics(self) -> dict[str, Any]:
-        """The run metrics of product.md (:func:`twin.runs.metrics.compute_metrics`)."""
-        from twin.runs.metrics import compute_metrics
+        """The run metrics of product.md and ``late_samples`` (:func:`twin.runs.metrics.run_metrics`)."""
+        from twin.runs.metrics import run_metrics
 
-        return compute_metrics(self.arrays())
+        return run_metrics(self.arrays())
 
     def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> None:
         """Write :meth:`arrays` atomically (see :func:`save_arrays`)."""

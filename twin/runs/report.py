@@ -37,7 +37,7 @@ from matplotlib.patches import Rectangle
 from matplotlib.transforms import Bbox
 
 from twin.physics.fillet import FILLET_X, FILLET_Y, Fillet
-from twin.runs.metrics import METRIC_KEYS, METRIC_WORDS, Windows, windows_of
+from twin.runs.metrics import METRIC_KEYS, METRIC_WORDS, Windows, late_samples, windows_of
 from twin.runs.record import load_events
 
 TC_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
@@ -67,10 +67,17 @@ def _scenario_lines(ts: Mapping[str, Any], w: Windows) -> list[str]:
     osc_text = (f"on, {1000 * osc.get('amplitude', 0):.0f} mm, {osc.get('period', 0):g} s" if osc.get("enabled")
                 else "off")
     mm = sc.get("mismatch") or {}
-    lines = [f"reference {ref_text} · duration {sc.get('duration', '?')} s · speed {sc.get('speed', '?')}",
-             f"oscillation {osc_text} · TC4 at {sc.get('tc4', '?')} (x/L_s, y/W_s) · "
-             f"TC noise {sc.get('tc_noise', '?')} K · seed {sc.get('seed', '?')}",
-             "plant mismatch: " + ", ".join(f"{k} {100 * float(v):+.0f} %" for k, v in mm.items()) if mm else ""]
+    plant = sc.get("plant") or {}
+    if plant.get("kind") == "opcua":  # a furnace over OPC UA: its own clock, noise and deviations; no truth
+        lines = [f"reference {ref_text} · duration {sc.get('duration', '?')} s · real time",
+                 f"oscillation {osc_text} · TC4 at {sc.get('tc4', '?')} (x/L_s, y/W_s)",
+                 f"furnace over OPC UA {plant.get('endpoint', '?')} (no truth) · {late_samples(ts)} late samples"]
+    else:
+        lines = [f"reference {ref_text} · duration {sc.get('duration', '?')} s · speed {sc.get('speed', '?')}",
+                 f"oscillation {osc_text} · TC4 at {sc.get('tc4', '?')} (x/L_s, y/W_s) · "
+                 f"TC noise {sc.get('tc_noise', '?')} K · seed {sc.get('seed', '?')}"
+                 + (f" · truth {sc['truth']}" if "truth" in sc else ""),
+                 "plant mismatch: " + ", ".join(f"{k} {100 * float(v):+.0f} %" for k, v in mm.items()) if mm else ""]
     if w.t0 > 0:
         lines.append(f"windows from the last reference change at t = {w.t0:.1f} s: {w.setpoint:g} K, t_E = {w.t_E:g} s")
     return [x for x in lines if x]

@@ -5,6 +5,11 @@ factory is given by the composition root (``twin/cli.py`` passes the rerun
 recorder from ``backend``), ``recording.rrd``.  ``twin`` itself never imports
 rerun.  The time series is flushed every ``flush_every_s`` simulated seconds and
 on stop or error, so a crash loses at most those seconds.
+
+A scenario whose ``plant`` is a furnace over OPC UA runs against it in real time (the furnace's clock
+paces the loop), with the link settings of ``FURNACE_TWIN_OPCUA_*`` and certificates under
+``$FURNACE_TWIN_DATA_DIR/opcua`` (default ``furnace-data/opcua``).  A furnace lost during the run ends it
+with its data written and exit status 3.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -20,6 +26,7 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
+from twin.furnace.interface import FurnaceLost
 from twin.limits import ScenarioLimits, furnace_name, scenario_limits
 from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
@@ -86,11 +93,13 @@ def execute_run(
     figures: bool = True,
     flush_every_s: float = 10.0,
 ) -> dict[str, Any]:
-    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out``."""
+    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out`` (and ``status``
+    ``"plant_lost"`` with ``error`` if the furnace was lost: the data up to then is written all the same)."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
     sinks = [make(out, loop) for make in sink_factories]
     flush_every = max(1, int(round(flush_every_s / loop.t_s)))
+    lost: FurnaceLost | None = None
     try:
         for snap in loop.run():
             for sink in sinks:
@@ -99,6 +108,9 @@ def execute_run(
                 loop.record.save(out / "timeseries.npz")
                 for sink in sinks:
                     sink.flush()
+    except FurnaceLost as exc:
+        log.error("the furnace was lost: %s", exc)
+        lost = exc
     finally:
         ts = loop.timeseries()
         save_arrays(out / "timeseries.npz", ts)
@@ -107,11 +119,14 @@ def execute_run(
         loop.close()
     metrics = loop.metrics()
     (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
-    if figures:
+    if figures and len(ts["t"]):
         from twin.runs.figures import plot_run
 
         plot_run(ts, out)
-    return {**metrics, "out": str(out)}
+    result: dict[str, Any] = {**metrics, "out": str(out)}
+    if lost is not None:
+        result.update(status="plant_lost", error=str(lost))
+    return result
 
 
 def _json_safe(d: Any) -> Any:
@@ -131,8 +146,26 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         return 2
     out = Path(args.out)
     log.info("run: %s -> %s", scenario.to_json(), out)
+    from twin.furnace.connect import open_furnace
+    from twin.radiation import radiation_model
+
+    # a simulated furnace needs the radiation model; a furnace over OPC UA is connected first, so an
+    # endpoint the run cannot use fails at once, before the model is loaded
+    radiation = radiation_model(cfg) if scenario.plant.kind == "simulated" else None
     try:
-        result = execute_run(ClosedLoop(cfg, scenario), out, sink_factories=sink_factories)
+        furnace = open_furnace(cfg, scenario, radiation, data_dir=os.environ.get("FURNACE_TWIN_DATA_DIR",
+                                                                                 "furnace-data"))
+    except (ValueError, OSError) as exc:
+        print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    try:
+        radiation = radiation if radiation is not None else radiation_model(cfg)
+        loop = ClosedLoop(cfg, scenario, radiation, furnace=furnace)
+    except BaseException:
+        furnace.close()
+        raise
+    try:
+        result = execute_run(loop, out, sink_factories=sink_factories)
     except EstimateDiverged as exc:  # the loop switched the lamps off; the data up to it is in `out`
         print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
         return 1
@@ -141,4 +174,7 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
     else:
         for k, v in result.items():
             log.info("%-36s %s", k, f"{v:.4f}" if isinstance(v, float) else v)
+    if result.get("status") == "plant_lost":
+        print(f"furnace-twin run: {result['error']}; the data so far is in {out}", file=sys.stderr)  # noqa: T201
+        return 3
     return 0

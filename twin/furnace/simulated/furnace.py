@@ -64,6 +64,7 @@ class SimulatedFurnace:
     """
 
     kind = "simulated"
+    realtime = False  # no clock of its own: time moves on with apply()
 
     def __init__(
         self,
@@ -96,6 +97,8 @@ class SimulatedFurnace:
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
+        self._last_read: tuple[float, Readings] | None = None  # (plant time, readings): a repeated read of
+        # the same sample gives the same readings
 
     @classmethod
     def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *,
@@ -132,16 +135,22 @@ class SimulatedFurnace:
 
     def read(self, t: float) -> Readings:
         """TC1..TC4 at the plant's current time t: bilinear in the field (lagged and biased with a truth) plus
-        N(0, tc_noise^2) (section 3.2)."""
+        N(0, tc_noise^2) (section 3.2).
+
+        Reading the same sample again returns the same readings (no new noise draw)."""
         self._check_time(t, "read")
+        if self._last_read is not None and self._last_read[0] == self._state.t:
+            return self._last_read[1]
         if self._sensors is None:
             values = self.thermocouples.read(self._state.T, self._rng, self._tc_noise)
         else:
             values = self._sensors.values()
             if self._tc_noise > 0.0:
                 values = values + self._tc_noise * self._rng.standard_normal(values.shape)
-        return Readings(values=values, timestamps=np.full(len(values), float(t)),
-                        status=tuple("good" for _ in values))
+        readings = Readings(values=values, timestamps=np.full(len(values), float(t)),
+                            status=tuple("good" for _ in values))
+        self._last_read = (self._state.t, readings)
+        return readings
 
     def apply(self, u: Array, t: float) -> None:
         """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]).
@@ -165,6 +174,9 @@ class SimulatedFurnace:
 
     def true_field(self) -> Array:
         return self._state.T.copy()
+
+    def drain_events(self) -> tuple[str, ...]:
+        return ()
 
     def close(self) -> None:
         return None

@@ -1,0 +1,267 @@
+"""The asyncio side of an OPC UA furnace: connect, find the nodes, subscribe to the readings, write the inputs,
+and keep the link (reconnect for a configured time, else give up).
+
+A :class:`FurnaceLink` lives on one event loop (the OPC UA thread of
+:class:`twin.furnace.opcua.furnace.OpcUaFurnace`, never the server's).  Readings are pushed to
+``on_reading(channel, value, good, source_s, arrival)`` from a subscription whose trigger includes the
+source timestamp, so a repeated value still counts as a new sample.  A lost link (the transport closes,
+the server stops answering, a write fails for lack of a connection) is retried every
+``RETRY_S`` for ``options.reconnect_s``; then the furnace is given up (:attr:`FurnaceLink.lost_reason`,
+state ``down``).  The furnace may also be given up with its transport still up (:meth:`FurnaceLink.declare_lost`,
+e.g. it sends no readings): writes still go through then, so the lamps can be commanded off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime
+import logging
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from twin.furnace.opcua.browse import MissingNodes, ResolvedNode, resolve
+from twin.furnace.opcua.nodes import NodeMap
+from twin.furnace.opcua.options import OpcUaOptions
+from twin.furnace.opcua.security import secure_client, trusted_dir
+
+log = logging.getLogger(__name__)
+
+RETRY_S = 0.5  # between reconnection attempts
+QUEUE_SIZE = 10  # per monitored item: readings of several samples in one publish are all kept
+ReadingSink = Callable[[int, float, bool, float, float], None]
+
+
+class FurnaceUnavailable(ConnectionError):
+    """The furnace cannot be used (unreachable, refused, lacks nodes); the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    endpoint: str
+    options: OpcUaOptions
+    cert_dir: Path
+    node_map: NodeMap
+    channels: tuple[str, ...]  # the twin names read as samples, in channel order
+
+
+def explain(exc: BaseException, s: LinkSettings) -> str:
+    """A user's message for a failed connection or request."""
+    from asyncua import ua
+
+    name = type(exc).__name__
+    if isinstance(exc, MissingNodes):
+        return f"{s.endpoint}: {exc}"
+    if isinstance(exc, ConnectionRefusedError):
+        return f"cannot reach {s.endpoint}: connection refused (is the furnace's OPC UA server running?)"
+    if isinstance(exc, TimeoutError):
+        return f"no answer from {s.endpoint} within {s.options.connect_timeout_s:g} s"
+    if isinstance(exc, OSError):
+        return f"cannot reach {s.endpoint}: {exc.strerror or exc}"
+    if isinstance(exc, ua.UaStatusCodeError):
+        code = exc.code
+        if code == ua.StatusCodes.BadCertificateUntrusted:
+            return (f"{s.endpoint}: a certificate is not trusted: the furnace must trust this twin's "
+                    f"{s.cert_dir / 'twin-cert.der'}, and this twin the furnace's (put it in "
+                    f"{trusted_dir(s.cert_dir)})")
+        if code in (ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenRejected,
+                    ua.StatusCodes.BadIdentityTokenInvalid):
+            return (f"{s.endpoint} refused the user name or password (FURNACE_TWIN_OPCUA_USERNAME / _PASSWORD): "
+                    f"{name}")
+        if code in (ua.StatusCodes.BadSecurityPolicyRejected, ua.StatusCodes.BadSecurityModeRejected,
+                    ua.StatusCodes.BadSecurityChecksFailed):
+            return (f"{s.endpoint} does not accept security {s.options.security!r} "
+                    f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): {name}")
+    if isinstance(exc, ua.UaError) and "No matching endpoints" in str(exc):
+        return (f"{s.endpoint} does not accept security {s.options.security!r} "
+                f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): it offers no such endpoint")
+    return f"{s.endpoint}: {name}: {exc}"
+
+
+def _unix_s(stamp: Any) -> float | None:
+    if not isinstance(stamp, datetime.datetime):
+        return None
+    if stamp.tzinfo is None:
+        stamp = stamp.replace(tzinfo=datetime.UTC)
+    return stamp.timestamp()
+
+
+class _Readings:
+    """The subscription handler: a data change becomes one reading of its channel, in twin units."""
+
+    def __init__(self, channel_of: Mapping[Any, int], specs: Sequence[Any], sink: ReadingSink) -> None:
+        self.channel_of, self.specs, self.sink = channel_of, specs, sink
+
+    def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
+        ch = self.channel_of.get(node.nodeid)
+        if ch is None:
+            return
+        dv = data.monitored_item.Value
+        good = dv.StatusCode is None or dv.StatusCode.is_good()
+        try:
+            value = self.specs[ch].to_twin(float(val)) if good and val is not None else math.nan
+        except (TypeError, ValueError):
+            value, good = math.nan, False
+        source = _unix_s(dv.SourceTimestamp) or _unix_s(dv.ServerTimestamp) or time.time()
+        self.sink(ch, value, good, source, time.monotonic())
+
+    def status_change_notification(self, status: Any) -> None:
+        log.warning("furnace subscription status: %s", status)
+
+
+class FurnaceLink:
+    """One furnace over OPC UA, on the current event loop."""
+
+    def __init__(self, settings: LinkSettings, on_reading: ReadingSink) -> None:
+        self.s = settings
+        self._on_reading = on_reading
+        self._client: Any = None
+        self.nodes: dict[str, ResolvedNode] = {}
+        self.state = "new"  # the transport: new, connected, reconnecting, down (not restored), closed
+        self.connected_since = -math.inf  # monotonic s of the latest (re)connection
+        self.lost_reason: str | None = None  # set when the furnace is given up
+        self.events: deque[str] = deque()  # for the run's event log (read from another thread)
+        self._reconnect_task: asyncio.Task[None] | None = None
+
+    # ---- connecting
+    async def _connect_once(self) -> None:
+        from asyncua import Client, ua
+
+        o = self.s.options
+        client = Client(self.s.endpoint, timeout=o.connect_timeout_s, watchdog_intervall=1.0)
+        await secure_client(client, security=o.security, cert_dir=self.s.cert_dir, username=o.username,
+                            password=o.secret())
+        await asyncio.wait_for(client.connect(), timeout=o.connect_timeout_s)
+        try:
+            nodes = await resolve(client, self.s.node_map)
+            channel_of = {nodes[name].node.nodeid: i for i, name in enumerate(self.s.channels)}
+            specs = [self.s.node_map.nodes[name] for name in self.s.channels]
+            sub = await client.create_subscription(0, _Readings(channel_of, specs, self._on_reading))
+            trigger = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
+            requests = [ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(NodeId=nodes[name].node.nodeid, AttributeId=ua.AttributeIds.Value),
+                MonitoringMode=ua.MonitoringMode.Reporting,
+                RequestedParameters=ua.MonitoringParameters(ClientHandle=10_000 + i, SamplingInterval=0.0,
+                                                            QueueSize=QUEUE_SIZE, DiscardOldest=True,
+                                                            Filter=trigger))
+                for i, name in enumerate(self.s.channels)]
+            for result in await sub.create_monitored_items(requests):
+                if isinstance(result, ua.StatusCode):
+                    result.check()
+        except BaseException:
+            await self._drop(client)
+            raise
+        client.connection_lost_callback = self._lost
+        self._client, self.nodes, self.state = client, nodes, "connected"
+        self.connected_since = time.monotonic()
+
+    async def open(self) -> None:
+        """The first connection; :class:`FurnaceUnavailable` with a message if it fails."""
+        try:
+            await self._connect_once()
+        except Exception as exc:
+            raise FurnaceUnavailable(explain(exc, self.s)) from exc
+        log.info("connected to the furnace at %s (security %s)", self.s.endpoint, self.s.options.security)
+
+    @staticmethod
+    async def _drop(client: Any) -> None:
+        try:
+            await asyncio.wait_for(client.disconnect(), timeout=1.0)
+        except Exception:
+            try:
+                client.disconnect_socket()
+            except Exception:
+                log.debug("dropping an OPC UA client", exc_info=True)
+
+    # ---- keeping the link
+    @property
+    def lost(self) -> bool:
+        """The furnace is given up (the run ends ``plant_lost``)."""
+        return self.lost_reason is not None
+
+    async def _lost(self, exc: BaseException) -> None:
+        if self.state != "connected" or self.lost:
+            return
+        self.state = "reconnecting"
+        msg = (f"link to the furnace lost ({explain(exc, self.s)}); reconnecting for up to "
+               f"{self.s.options.reconnect_s:g} s")
+        log.warning(msg)
+        self.events.append(msg)
+        self._reconnect_task = asyncio.get_running_loop().create_task(self._reconnect(time.monotonic()))
+
+    async def _reconnect(self, since: float) -> None:
+        client, self._client = self._client, None
+        if client is not None:
+            await self._drop(client)
+        deadline = since + self.s.options.reconnect_s
+        last: BaseException | None = None
+        while self.state == "reconnecting":
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            try:
+                await asyncio.wait_for(self._connect_once(), timeout=max(remaining, 0.1))
+            except Exception as exc:
+                last = exc
+                await asyncio.sleep(min(RETRY_S, max(deadline - time.monotonic(), 0.0)))
+                continue
+            msg = f"link to the furnace restored after {time.monotonic() - since:.1f} s"
+            log.info(msg)
+            self.events.append(msg)
+            return
+        if self.state == "reconnecting":
+            why = explain(last, self.s) if last is not None else "no attempt succeeded"
+            self.state = "down"
+            self.declare_lost(f"the link to the furnace was lost and not restored within "
+                              f"{self.s.options.reconnect_s:g} s ({why})")
+
+    def declare_lost(self, reason: str) -> None:
+        """Give the furnace up (the run then ends ``plant_lost``); the transport stays as it is."""
+        if self.lost or self.state == "closed":
+            return
+        self.lost_reason = reason
+        log.error(reason)
+        self.events.append(reason)
+
+    # ---- requests
+    def _variant(self, name: str, value: Any) -> Any:
+        from asyncua import ua
+
+        vt = self.nodes[name].variant_type
+        if vt == ua.VariantType.Boolean:
+            return ua.Variant(bool(value), vt)
+        if vt in (ua.VariantType.Double, ua.VariantType.Float):
+            return ua.Variant(float(self.s.node_map.nodes[name].to_furnace(float(value))), vt)
+        return ua.Variant(int(round(self.s.node_map.nodes[name].to_furnace(float(value)))), vt)
+
+    async def write(self, values: Mapping[str, Any]) -> None:
+        """One Write request for all ``values`` (twin units); a lost transport starts the reconnection."""
+        client = self._client
+        if self.state != "connected" or client is None:
+            raise ConnectionError(f"the link to the furnace is {self.state}")
+        names = list(values)
+        try:
+            await client.write_values([self.nodes[n].node for n in names],
+                                      [self._variant(n, values[n]) for n in names])
+        except (ConnectionError, OSError, TimeoutError) as exc:
+            await self._lost(exc)
+            raise
+
+    async def read(self, names: Sequence[str]) -> dict[str, Any]:
+        client = self._client
+        if self.state != "connected" or client is None:
+            raise ConnectionError(f"the link to the furnace is {self.state}")
+        values = await client.read_values([self.nodes[n].node for n in names])
+        return dict(zip(names, values, strict=True))
+
+    async def close(self) -> None:
+        self.state = "closed"
+        if self._reconnect_task is not None:
+            self._reconnect_task.cancel()
+        client, self._client = self._client, None
+        if client is not None:
+            await self._drop(client)
