@@ -67,8 +67,8 @@ def test_finding_02_divergence_stops_the_loop_lamps_off(small_radiation, plans, 
     loop = ClosedLoop(cfg, sc, small_radiation, furnace=furnace, plan_cache=plans)
     update = loop.estimator.update
 
-    def diverging(y):  # an estimator that runs off after 2 s, as the noisy EKF did
-        state = update(y)
+    def diverging(y, learn=True):  # an estimator that runs off after 2 s, as the noisy EKF did
+        state = update(y, learn)
         if loop.j >= 20:
             state.theta[:] = -1.5e8 * (loop.j - 19)
         return state

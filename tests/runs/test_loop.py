@@ -44,9 +44,9 @@ def test_estimator_sees_only_three_tc_readings(small_radiation, plans):
     seen = []
     update = loop.estimator.update
 
-    def spy(y):
+    def spy(y, learn=True):
         seen.append(np.array(y, copy=True))
-        return update(y)
+        return update(y, learn)
 
     loop.estimator.update = spy
     snaps = list(loop.run())

@@ -132,7 +132,22 @@ def test_a_run_without_samples_gives_nan_everywhere():
     for k in ("t", "T_ref", "T_mean_hat", "tc", "tc_hat", "t_field", "field_hat", "field_true"):
         ts[k] = ts[k][:0]
     m = compute_metrics(ts)
-    assert set(m) == set(METRIC_KEYS) and all(np.isnan(v) for v in m.values()), m
+    # product.md's keys, and a simulation's true transient mean error (issue 11), all NaN
+    assert set(m) == {*METRIC_KEYS, "true_mean_error_transient_max"} and all(np.isnan(v) for v in m.values()), m
+
+
+def test_true_transient_mean_error_is_that_of_the_true_field():
+    """Oracle: a true field 22 K above the reference in the transient, 5.5 K in the steady window (2 % and
+    0.5 % of 1100 K); the estimate is exact, so only the true-field metrics see it; no truth, no key."""
+    ts = _series()
+    transient = window(ts["t"], ts["t_E"], "transient")
+    ts["field_true"] = ts["field_true"] + np.where(transient, 22.0, 5.5)[:, None, None]
+    m = compute_metrics(ts)
+    assert m["true_mean_error_transient_max"] == pytest.approx(0.02)
+    assert m["true_mean_error_steady_max"] == pytest.approx(0.005)
+    assert m["mean_error_transient_max"] == pytest.approx(0.0)
+    del ts["field_true"]
+    assert "true_mean_error_transient_max" not in compute_metrics(ts)
 
 
 # ------------------------------------------------------------------ properties (hypothesis)

@@ -240,12 +240,15 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
         "true_mean_error_steady_max": _max(true_mean_err, stf),
         "field_estimation_error_steady_max": _max(est_err, stf),
     }
+    if "field_true" in ts:  # the transient seen in the true field: what the estimated mean error hides
+        out["true_mean_error_transient_max"] = _max(true_mean_err, trf)
     return _extras(ts, out, t, st, tc_err)
 
 
 def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc_err: Array,
             ) -> dict[str, Any]:
-    """The metrics a run has only in some configurations: ``tc4_error_oscillation_amplitude`` (an oscillating
+    """The metrics a run has only in some configurations (``true_mean_error_transient_max``, a simulated
+    furnace's, is added before): ``tc4_error_oscillation_amplitude`` (an oscillating
     run: the TC4 error's component at the oscillation frequency over the steady window, relative),
     ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run) and ``shadow`` (the shadow
     estimator's metrics)."""
