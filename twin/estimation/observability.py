@@ -17,7 +17,7 @@ Example
 -------
 >>> import numpy as np
 >>> F = np.array([[4.0, 1.0], [1.0, 1.0]])
->>> round(correlations(F)[0, 1], 3)
+>>> float(round(correlations(F)[0, 1], 3))
 -0.5
 """
 
