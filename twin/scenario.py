@@ -173,6 +173,28 @@ class Mismatch(_Model):
     lamp_efficiency: Num = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
 
 
+class EstimatorChoice(_Model):
+    """How the twin estimates (issue 11): the model's motion and whether it calibrates parameters.
+
+    ``motion="averaged", calibrate=False`` is the paper's EKF (section 3.2, eq. 11); the defaults are
+    the best measured configuration (README, campaign).
+    """
+
+    motion: Literal["averaged", "position_aware"] = Field(
+        "position_aware", description="'averaged' (paper, eq. 11) or 'position_aware' (model at eta(t_j))")
+    calibrate: bool = Field(True, description="learn lamp efficiency and emissivity online (joint EKF)")
+
+
+#: The paper's estimator, one setting away from the default.
+PAPER_ESTIMATOR = EstimatorChoice(motion="averaged", calibrate=False)
+
+
+class EstimatorSpec(EstimatorChoice):
+    """The run's estimator and, optionally, a shadow estimator on the same TC data (shown beside it)."""
+
+    shadow: EstimatorChoice | None = Field(None, description="a second estimator to compare, or null")
+
+
 class SimulatedPlant(_Model):
     """The run's furnace is simulated in process (``SimulatedFurnace``): any speed."""
 
@@ -211,6 +233,7 @@ class Scenario(_Model):
     tc_noise: Num = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
+    estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
     truth: lim.TruthKind = Field(
         lim.TRUTH_DEFAULT,
         description="'independent': the simulated furnace differs from the twin's model as its furnace file's "

@@ -114,8 +114,13 @@ def _gain(S: Array, PCt: Array) -> Array:
     return np.asarray(x, float).T
 
 
-def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -> tuple[EKFState, UpdateInfo]:
+def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float,
+               consider: int = 0) -> tuple[EKFState, UpdateInfo]:
     """Measurement update (13) in Joseph form, leaving out missing or gated readings.
+
+    ``consider`` > 0: the last ``consider`` entries of the state are "consider" states (Schmidt-Kalman):
+    their rows of the gain are 0, so the readings do not move them, while their uncertainty still widens the
+    others' gain through the cross-covariance; the Joseph form keeps P right for such a gain.
 
     Parameters
     ----------
@@ -158,6 +163,8 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     else:
         nu, PCt, S = innov[used], PCt_full[:, used], S_full[np.ix_(used, used)]
     gain = _gain(S, PCt)
+    if consider:
+        gain[-consider:] = 0.0
     theta = state.theta + gain @ nu
     # Joseph form (I - K C) P (I - K C)^T + K R K^T, expanded with S = C P C^T + R:
     #   P - K (P C^T)^T - (P C^T) K^T + K S K^T = P - U V^T,  U = [K, P C^T - K S],  V = [P C^T, K],

@@ -62,8 +62,10 @@ from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.control.plan import plain_status
 from twin.furnace.interface import Furnace, Readings
+from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.estimators import RunEstimators
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
@@ -82,6 +84,8 @@ class _Plan:
     model: Any
     plan: Any
     gains: Any
+    oscillation: OscillationSpec
+    parameters: Parameters  # the calibrated deviations the controller's model was built with
 
 
 class ClosedLoop:
@@ -112,7 +116,7 @@ class ClosedLoop:
         budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.lqg import Controller
-        from twin.estimation.ekf import Estimator
+        from twin.model.tables import model_tables
         from twin.radiation import radiation_model
 
         self.cfg = cfg
@@ -128,6 +132,7 @@ class ClosedLoop:
 
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
         self.furnace: Furnace = furnace
+        self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
         self._budget = budget
         self._replanner = Replanner(background, budget)
@@ -152,11 +157,12 @@ class ClosedLoop:
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None, budget=budget)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
-        self.estimator = Estimator(self._ctl.model, cfg, theta0)
+        self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
+        self.estimator = self.estimators.primary  # the one that feeds the controller
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -186,7 +192,7 @@ class ClosedLoop:
         from twin.control.reference import reachable_range
         from twin.model.discrete import discrete_model
 
-        return reachable_range(discrete_model(self.cfg, self.radiation, None), self.cfg)
+        return reachable_range(discrete_model(self.cfg, self.radiation, None, tables=self.tables), self.cfg)
 
     def _make_reference(self, spec: Reference, T_initial: float, t_start: float) -> Callable[[Any], Any]:
         """T_ref(t) of run time; raises ValueError (ReferenceError) for unreachable temperatures."""
@@ -196,20 +202,22 @@ class ClosedLoop:
 
     def _plan(
         self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
-        budget: PlanBudget | None = None,
+        parameters: Parameters, budget: PlanBudget | None = None,
     ) -> _Plan:
-        """Model, feedforward and gains for the rest of the run from t0 (eqs. 11, 18-29)."""
+        """Model (averaged over the motion, eq. 11, with the calibrated parameters), feedforward and gains
+        for the rest of the run from t0 (eqs. 18-29)."""
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
-        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
+        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
+                               parameters=parameters)
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, t_stop=self.scenario.duration,
                              budget=budget)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Plan(model, plan, gains)
+        return _Plan(model, plan, gains, spec, parameters)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> Future[float]:
@@ -242,10 +250,11 @@ class ClosedLoop:
         wanted_ref = self._wanted_reference
         ref_fn = wanted_ref[1] if wanted_ref is not None else self._ref_fn
         previous = self._ctl.plan
+        parameters = self.estimator.parameters  # the controller's model follows the calibration
         self._events.append(description)
 
         def job(budget: PlanBudget) -> _Plan:
-            return self._plan(spec, theta, t0, ref_fn, previous, budget=budget)
+            return self._plan(spec, theta, t0, ref_fn, previous, parameters, budget=budget)
 
         def install(ctl: _Plan, kinds: list[str]) -> float:
             t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
@@ -269,7 +278,8 @@ class ClosedLoop:
             ref_words = f" to {describe(self._reference_spec)}" if "reference" in kinds else ""
             how = f" ({describe(spec).removeprefix('on (')}" if spec.enabled else ""  # " (48 mm, 18 s)"
             said = {"reference": f"reference changed at t = {t:.1f} s{ref_words}",
-                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}"}
+                    "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}",
+                    "calibration": f"calibration at t = {t:.1f} s"}
             self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
             return t
 
@@ -284,9 +294,11 @@ class ClosedLoop:
 
     def _install(self, ctl: _Plan, description: str) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over."""
+        motion_changed = ctl.oscillation != self._ctl.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
-        self.estimator.set_model(ctl.model)
+        if motion_changed:  # the averaged estimators switch to the new period average with the controller
+            self.estimators.switch_motion(ctl.oscillation if ctl.oscillation.enabled else None)
         self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}")
 
     # ------------------------------------------------------------------ the loop
@@ -317,8 +329,11 @@ class ClosedLoop:
             self._events.extend(self.furnace.drain_events())
             eta = self.furnace.motion(t).eta
             c0 = time.perf_counter()
-            state = self.estimator.update(readings.for_estimator())  # eq. 13 (faulty readings gated inside)
-            theta = state.theta
+            holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
+            theta, shadow = self.estimators.update(readings.for_estimator(), learn=holding)  # eq. 13
+            due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
+            if due is not None:  # the controller's model follows the calibration (re-planned like a change)
+                self._request("calibration", due)
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
@@ -336,6 +351,7 @@ class ClosedLoop:
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
+                **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
             problem = self._guard.check(snap)
             if problem is not None:  # nothing of this sample reaches the furnace or the record
@@ -346,7 +362,7 @@ class ClosedLoop:
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimator.predict(snap.u)
+            self.estimators.predict(snap.u, eta)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap
@@ -379,5 +395,5 @@ class ClosedLoop:
         with self._lock:
             return self.record.arrays()
 
-    def metrics(self) -> dict[str, float]:
+    def metrics(self) -> dict[str, Any]:
         return self.record.metrics()

@@ -8,6 +8,9 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   reading (0 good, 1 bad, 2 missing: late or lost);
 * fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
   only when the furnace is a simulation (a real furnace has no true field);
+* with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
+  efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
+  ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
 * events: ``event_t`` (s), ``event_text`` and ``event_level`` (``info``, ``warn`` or ``error``), the
   run's own reports (re-plans, switches; the server adds its own: start, end, changes, saturation);
 * live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
@@ -53,7 +56,10 @@ Array = NDArray[np.float64]
 
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
-FIELD_SERIES = ("field_hat", "field_true")
+FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
+#: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
+#: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
+OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
 #: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
 TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 EVENT_LEVELS = ("info", "warn", "error")
@@ -149,6 +155,11 @@ class Snapshot:
     true_mean: float | None
     true_inhomogeneity: float | None
     events: tuple[str, ...] = ()
+    parameters: Array | None = None  # (3,) calibrated deviations (lamp efficiency, emissivity, convection)
+    parameter_sigma: Array | None = None  # (3,) their standard deviations
+    shadow_T_mean_hat: float | None = None  # the shadow estimator's fillet mean, TCs and field
+    shadow_tc_hat: Array | None = None
+    shadow_field_hat: Array | None = None
     tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
     late_samples: int = 0  # samples of the run so far with a reading that did not come in time
 
@@ -222,6 +233,7 @@ class RunRecord:
         self.header = header
         self.has_truth = has_truth
         self._columns: dict[str, _Column] = {}
+        self._optional: tuple[str, ...] = ()
         self._events: list[RunEvent] = []
         self._changes: list[RunChange] = []
 
@@ -237,6 +249,13 @@ class RunRecord:
             if snap.field_true is None:
                 raise ValueError("this record keeps a true field, the snapshot has none")
             values["field_true"] = snap.field_true
+        if not self._columns:  # the first sample decides which optional series the run has
+            self._optional = tuple(k for k in OPTIONAL_SERIES if getattr(snap, k) is not None)
+        for k in self._optional:
+            v = getattr(snap, k)
+            if v is None:
+                raise ValueError(f"this record keeps {k}, the snapshot has none")
+            values[k] = v
         if not self._columns:
             for k, v in values.items():
                 dtype = np.float32 if k in FIELD_SERIES else (np.int8 if k == "tc_status" else float)
@@ -260,10 +279,13 @@ class RunRecord:
         col = self._columns.get("tc_status")
         out["tc_status"] = col.view().copy() if col is not None else np.zeros((0, 4), np.int8)
         for k in FIELD_SERIES:
-            if k == "field_true" and not self.has_truth:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             col = self._columns.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
+        for k in self._optional:
+            if k not in FIELD_SERIES:
+                out[k] = self._columns[k].view().copy()
         out["t_field"] = out["t"].copy()
         out.update(event_arrays(self._events))
         out.update(change_arrays(self._changes))
@@ -293,7 +315,7 @@ class RunRecord:
         for k in SAMPLE_SERIES:
             out.setdefault(k, np.zeros(0))
         for k in FIELD_SERIES:
-            if k == "field_true" and not self.has_truth:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
         out["t_field"] = out["t"].copy()
@@ -306,7 +328,7 @@ class RunRecord:
         out.update(change_arrays(self._changes[changes_from:]))
         return out
 
-    def metrics(self) -> dict[str, float]:
+    def metrics(self) -> dict[str, Any]:
         """The run metrics of product.md and ``late_samples`` (:func:`twin.runs.metrics.run_metrics`)."""
         from twin.runs.metrics import run_metrics
 
