@@ -9,7 +9,9 @@ events since the previous frame), ``late_samples`` (samples of a real-time furna
 not all come in time, so far), and from the server (``backend.run_manager``): ``event_log``
 (those events as ``{n, t, text, level}``, ``n`` their index in the run's event list, so a page
 that also read ``GET /api/runs/{id}/series`` shows each one once), ``spread`` (max over the fillet
-|T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).
+|T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).  With a calibrating
+estimator ``calibration`` ({name: {"value", "sigma"}}, relative deviations), with a shadow
+estimator ``shadow`` ({"T_mean_hat", "tc_hat", "field_delta": shadow minus estimate, N_y x N_x, K}).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import math
 from typing import Any, Protocol
 
 import numpy as np
+
+from twin.model.tables import PARAMETERS
 
 FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps frames small
 
@@ -55,6 +59,16 @@ class SnapshotLike(Protocol):
     @property
     def events(self) -> Any: ...
     @property
+    def parameters(self) -> Any: ...  # (3,) calibrated deviations or None
+    @property
+    def parameter_sigma(self) -> Any: ...
+    @property
+    def shadow_T_mean_hat(self) -> float | None: ...
+    @property
+    def shadow_tc_hat(self) -> Any: ...
+    @property
+    def shadow_field_hat(self) -> Any: ...
+    @property
     def late_samples(self) -> int: ...
 
 
@@ -79,8 +93,28 @@ def events_of(ev: Any) -> list[str]:
     return [str(e) for e in ev]
 
 
+def calibration_values(s: SnapshotLike) -> dict[str, dict[str, float | None]] | None:
+    """{name: {"value", "sigma"}} of the calibrated parameters of a snapshot, or None."""
+    if s.parameters is None:
+        return None
+    values = np.asarray(s.parameters, dtype=float)
+    sigma = np.asarray(s.parameter_sigma if s.parameter_sigma is not None else np.full(len(values), np.nan), float)
+    return {name: {"value": finite_or_none(values[i]), "sigma": finite_or_none(sigma[i])}
+            for i, name in enumerate(PARAMETERS) if np.isfinite(values[i])}
+
+
 def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     """The small part of a snapshot (no fields): stored as the run's latest values."""
+    out = _scalars(s)
+    calibration = calibration_values(s)
+    if calibration is not None:
+        out["calibration"] = calibration
+    if s.shadow_T_mean_hat is not None:
+        out["shadow"] = {"T_mean_hat": finite_or_none(s.shadow_T_mean_hat), "tc_hat": _vector(s.shadow_tc_hat)}
+    return out
+
+
+def _scalars(s: SnapshotLike) -> dict[str, Any]:
     return {
         "t": float(s.t),
         "eta": float(s.eta),
@@ -110,19 +144,27 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
     """The frame of one snapshot; ``events`` replaces the snapshot's own (the events of every sample
     since the previous frame, so none is lost when samples are not streamed one by one)."""
     field = np.round(np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
-    field = np.where(np.isfinite(field), field, np.nan)
     frame = scalar_values(s)
     frame.update(
         run_id=run_id,
         seq=seq,
         wall_time=wall_time,
         status=status,
-        field=[[finite_or_none(v) for v in row] for row in field],
+        field=_grid(field),
         events=events_of(s.events) if events is None else list(events),
     )
+    shadow_field = s.shadow_field_hat
+    if shadow_field is not None and "shadow" in frame:
+        delta = np.round(np.asarray(shadow_field, dtype=float) - np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)
+        frame["shadow"]["field_delta"] = _grid(delta)
     if extra:
         frame.update(extra)
     return frame
+
+
+def _grid(field: Any) -> list[list[float | None]]:
+    f = np.asarray(field, dtype=float)
+    return [[finite_or_none(v) for v in row] for row in np.where(np.isfinite(f), f, np.nan)]
 
 
 def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, status: str,

@@ -11,6 +11,8 @@ One :class:`rerun.RecordingStream` per run, saved to its file before anything is
 - ``tc/reading/TC1..4`` and ``tc/error/TC1..4`` (reading minus estimate, K);
 - ``power/u/<group>`` and ``power/u_ff/<group>`` (fractions of u_max);
 - ``eta`` (m), ``inhomogeneity/estimated`` and ``inhomogeneity/true`` (K);
+- with a calibrating estimator ``calibration/<parameter>`` (relative deviation) and
+  ``calibration/<parameter>_sigma``; with a shadow estimator ``tc/error_shadow/TC1..4`` (K).
 - ``events``: the run's events (start, live changes, re-plans, saturated groups, feasibility
   warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time;
   ``faults/injected`` and ``faults/detected`` the fault events (the faults the simulated furnace started
@@ -39,6 +41,7 @@ import rerun.blueprint as rrb
 
 from backend.frames import SnapshotLike
 from twin.config import FurnaceConfig
+from twin.model.tables import PARAMETERS
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +182,9 @@ class RecordingSink:
             "inh_true": _float(s.true_inhomogeneity),
             "tc": np.asarray(s.tc, dtype=float), "tc_hat": np.asarray(s.tc_hat, dtype=float),
             "u": np.asarray(s.u, dtype=float), "u_ff": np.asarray(s.u_ff, dtype=float),
+            "parameters": None if s.parameters is None else np.asarray(s.parameters, dtype=float),
+            "parameter_sigma": None if s.parameter_sigma is None else np.asarray(s.parameter_sigma, dtype=float),
+            "shadow_tc_hat": None if s.shadow_tc_hat is None else np.asarray(s.shadow_tc_hat, dtype=float),
         })
         if s.t >= self._next_image_t:
             self._next_image_t = float(s.t) + self.image_interval
@@ -229,6 +235,17 @@ class RecordingSink:
             arr = np.stack([r[kind] for r in rows])
             for j, g in enumerate(self.groups):
                 send(f"power/{kind}/{g}", arr[:, j])
+        if all(r["parameters"] is not None for r in rows):
+            values = np.stack([r["parameters"] for r in rows])
+            sigma = np.stack([r["parameter_sigma"] for r in rows])
+            for j, name in enumerate(PARAMETERS):
+                if np.isfinite(values[:, j]).any():
+                    send(f"calibration/{name}", values[:, j])
+                    send(f"calibration/{name}_sigma", sigma[:, j])
+        if all(r["shadow_tc_hat"] is not None for r in rows):
+            shadow_err = tc - np.stack([r["shadow_tc_hat"] for r in rows])
+            for i, name in enumerate(TC_NAMES):
+                send(f"tc/error_shadow/{name}", shadow_err[:, i])
         self.rec.flush()
 
     def close(self) -> None:

@@ -88,7 +88,7 @@ class RunSummary(BaseModel):
     ended_at: float | None = None
     scenario: dict[str, Any]
     latest: dict[str, Any] | None = Field(None, description="latest scalar values (t, T_ref, T_mean_hat, ...)")
-    metrics: dict[str, float | None] | None = None
+    metrics: dict[str, Any] | None = Field(None, description="product.md metrics (calibration, shadow: objects)")
     error: str | None = None
     label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
     links: RunLinks

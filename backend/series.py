@@ -12,7 +12,13 @@ always kept); alongside:
   sample since the previous kept one (``twin.control.saturation.bound_flags``);
 - ``events`` (every event, ``{n, t, text, level}``), ``changes`` (the live changes applied),
   ``windows`` (the metric windows, from the last reference change: ``twin.runs.metrics.windows_of``);
-- ``field``: the last estimated field; ``n_samples``, ``t_last``.
+- ``field``: the last estimated field; ``n_samples``, ``t_last``;
+- with a calibrating estimator (``twin.runs.record.OPTIONAL_SERIES``): ``parameters`` and
+  ``parameter_sigma`` as ``{name: [...]}`` (relative deviations, decimated like the scalars) for the
+  calibrated names only (``twin.model.tables.PARAMETERS`` with a finite value in some sample);
+- with a shadow estimator: ``shadow_T_mean_hat`` (K), ``shadow_tc_hat`` (K, per sample 4, decimated
+  like the scalars) and ``shadow_field_delta``: the last shadow field minus the last estimated field
+  (N_y x N_x, K).
 """
 
 from __future__ import annotations
@@ -25,12 +31,14 @@ import numpy as np
 
 from backend.frames import json_safe
 from twin.control.saturation import bound_flags
+from twin.model.tables import PARAMETERS
 from twin.physics.fillet import Fillet
 from twin.runs.metrics import windows_of
 from twin.runs.record import load_arrays, load_changes, load_events
 from twin.runs.series_store import has_parts, load_parts
 
 SCALARS = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
+SHADOW_SCALARS = ("shadow_T_mean_hat", "shadow_tc_hat")
 
 
 def pick(n: int, max_points: int) -> np.ndarray:
@@ -63,6 +71,26 @@ def fillet_series(z: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndar
     return tf, np.asarray(fillet.sup(fh, T_ref_f)), np.asarray(fillet.spread(fh))
 
 
+def estimator_series(z: Mapping[str, Any], idx: np.ndarray) -> dict[str, Any]:
+    """The calibrated parameters and the shadow estimator's series at the kept samples ``idx`` (module
+    docstring); empty for a run without them."""
+    out: dict[str, Any] = {}
+    if "parameters" in z and len(z["parameters"]):
+        values = np.asarray(z["parameters"], dtype=float).reshape(len(z["parameters"]), -1)
+        sigma = (np.asarray(z["parameter_sigma"], dtype=float).reshape(values.shape) if "parameter_sigma" in z
+                 else np.full(values.shape, np.nan))
+        names = [(i, name) for i, name in enumerate(PARAMETERS) if np.isfinite(values[:, i]).any()]
+        out["parameters"] = {name: values[idx, i] for i, name in names}
+        out["parameter_sigma"] = {name: sigma[idx, i] for i, name in names}
+    for k in SHADOW_SCALARS:
+        if k in z and len(z[k]):
+            out[k] = np.asarray(z[k], dtype=float)[idx]
+    if "shadow_field_hat" in z and len(z["shadow_field_hat"]) and "field_hat" in z and len(z["field_hat"]):
+        out["shadow_field_delta"] = (np.asarray(z["shadow_field_hat"][-1], dtype=float)
+                                     - np.asarray(z["field_hat"][-1], dtype=float))
+    return out
+
+
 def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
     """The JSON of the module docstring from a time series in the ``timeseries.npz`` layout."""
     n = len(z["t"])
@@ -75,6 +103,7 @@ def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
         fidx = pick(len(tf), max_points)
         out["t_field"], out["inhomogeneity"], out["spread"] = tf[fidx], sup[fidx], spread[fidx]
         out["field"] = np.asarray(z["field_hat"][-1], dtype=float)
+    out.update(estimator_series(z, idx))
     out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(load_events(z))]
     out["changes"] = [{"t": c.t, "kind": c.kind, "body": c.body} for c in load_changes(z)]
     out["windows"] = windows_of(z).to_json()

@@ -1,6 +1,7 @@
 // The shown run's charts (plotly.js from /assets/plotly.min.js): a registry of figure functions, one per
 // chart element, redrawn together at most every RENDER_MS.  A new chart: a card in #plots (panels.js) and
-// registerFigure(id, () => ({data, layout})).
+// registerFigure(id, () => ({data, layout})); a figure function that returns null is not drawn this time
+// (e.g. its card is hidden because the shown run has no such data).
 import { heatmapFigure } from "./heatmap.js";
 import { GROUP_COLORS, LANE, LANE0, saturationShapes, windowShapes } from "./overlays.js";
 import { emptySeries, saturationSpans } from "./series.js";
@@ -112,6 +113,7 @@ export function render() {
     const el = document.getElementById(id);
     if (!el) continue;
     const fig = figure();
+    if (!fig) continue;
     fig.layout.datarevision = revision;
     window.Plotly.react(el, fig.data, fig.layout, CONFIG);
   }

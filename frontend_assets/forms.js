@@ -1,5 +1,6 @@
 // What the user does: start a run (the form), change the shown run live, stop it, enter the token.
 import { api, setToken } from "./api.js";
+import { estimatorFromForm, showEstimatorSummary } from "./estimatorform.js";
 import { checkSoon, showFeasibility } from "./feasibility.js";
 import { restoreForm, saveForm } from "./formstore.js";
 import { readNumber, readSpeed, setLiveOscillation } from "./inputs.js";
@@ -44,6 +45,7 @@ export function scenarioFromForm(form = $("start-form")) {
     tc_noise: n("tc_noise"),
     seed: Math.trunc(n("seed")),
     truth: el("truth").value,
+    estimator: estimatorFromForm(form),
   };
 }
 
@@ -141,8 +143,9 @@ async function stopRun() {
 export function wireForms() {
   const form = $("start-form");
   restoreForm(form);
+  showEstimatorSummary(form);
   form.addEventListener("submit", startRun);
-  const edited = () => { saveForm(form); checkSoon(() => scenarioFromForm(form)); };
+  const edited = () => { saveForm(form); showEstimatorSummary(form); checkSoon(() => scenarioFromForm(form)); };
   form.addEventListener("input", edited);
   form.addEventListener("change", edited);
   $("ref-btn").addEventListener("click", changeReference);

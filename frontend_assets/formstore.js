@@ -19,6 +19,7 @@ export function restoreForm(form) {
     if (!el.name || !(el.name in data)) continue;
     const v = data[el.name];
     if (el.type === "radio") el.checked = el.value === v;
+    else if (el.tagName === "SELECT") { if ([...el.options].some((o) => o.value === v)) el.value = v; } // a choice still offered
     else if (el.type === "checkbox") el.checked = !!v;
     else if (el.type === "number") {
       const x = Number(v);

@@ -1,6 +1,7 @@
 // The inputs of the page, built from the loaded furnace (GET /api/furnace): every min, max and
 // default comes from its scenario limits, none is written in index.html; numbers are read with the
 // same limits, and an empty or wrong field is named before anything is sent.
+import { fillEstimatorChoices } from "./estimatorform.js";
 import { $ } from "./page.js";
 import { state } from "./state.js";
 
@@ -43,6 +44,7 @@ export function applyLimits(furnace) {
   }
   const truth = document.querySelector("#start-form [name=truth]");
   truth.replaceChildren(...limits.truth.choices.map((c) => new Option(c, c, false, c === limits.truth.default)));
+  fillEstimatorChoices(furnace);
   const speed = document.querySelector("#start-form [name=speed]");
   speed.value = String(limits.speed.default);
   speed.title = `'max' or a real-time factor from ${limits.speed.min} to ${limits.speed.max}`;

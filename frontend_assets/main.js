@@ -3,6 +3,7 @@
 import { api, forgetOldToken, token } from "./api.js";
 import { render, startRendering } from "./charts.js";
 import { refreshComparison, startComparing } from "./compare.js";
+import { initEstimatorCharts } from "./estimators.js";
 import { wireFaults } from "./faults.js";
 import { wireForms } from "./forms.js";
 import { wireHelp } from "./glossary.js";
@@ -53,6 +54,7 @@ async function init() {
     return;
   }
   wireHelp();
+  initEstimatorCharts();
   wireForms();
   initStudies();
   wireHeatScale(() => { state.dirty = true; });

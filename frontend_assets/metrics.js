@@ -25,18 +25,31 @@ function windowNote(run) {
     + `% of ${fmt(w.setpoint, 0)} K`;
 }
 
-// One run: metric | K | %, with a help mark per metric and the windows they were taken over.
+const PARAM_WORDS = { lamp_efficiency: "lamp efficiency", emissivity: "emissivity", convection: "convection" };
+
+// A calibrating run's learned parameters at its end, in % of the model's: "lamp efficiency −9.8 % ± 0.4 %".
+function calibrationNote(cal) {
+  if (!cal || !Object.keys(cal).length) return "";
+  const one = ([name, c]) => `${esc(PARAM_WORDS[name] || name)} ${c.value === null ? "–" : `${fmt(100 * c.value, 1)} %`}`
+    + `${c.sigma === null || c.sigma === undefined ? "" : ` ± ${fmt(100 * c.sigma, 1)} %`}`;
+  return `<div class="note">calibrated at the end (vs the model): ${Object.entries(cal).map(one).join(" · ")}</div>`;
+}
+
+// One run: metric | K | % (| shadow % with a shadow estimator), with a help mark per metric and the windows
+// they were taken over; a calibrating run's learned parameters below.
 export function metricsTable(run) {
   const m = run.metrics;
   if (!m) return `<div class="note">metrics when the run ends · ${esc(windowNote(run))}</div>`;
-  const scale = scaleOf(run);
+  const scale = scaleOf(run), shadow = m.shadow && typeof m.shadow === "object" ? m.shadow : null;
   // a furnace over OPC UA has no truth: no rows for the true_* and field-estimation metrics (always null)
   const noTruth = run.scenario.plant && run.scenario.plant.kind === "opcua";
   const shown = (k) => k in m && !(noTruth && (k.startsWith("true_") || k.startsWith("field_estimation")));
   const rows = keys().filter(shown).map((k) => `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>`
-    + `<td class="num">${kelvin(m[k], scale)}</td><td class="num">${percent(m[k])}</td></tr>`).join("");
+    + `<td class="num">${kelvin(m[k], scale)}</td><td class="num">${percent(m[k])}</td>`
+    + `${shadow ? `<td class="num">${percent(shadow[k])}</td>` : ""}</tr>`).join("");
+  const shadowHead = shadow ? '<th class="num" title="the same metric of the shadow estimator">shadow %</th>' : "";
   return `<div class="note">${esc(windowNote(run))}</div><table><thead><tr><th>metric</th><th class="num">K</th>`
-    + `<th class="num">% of setpoint</th></tr></thead><tbody>${rows}</tbody></table>`;
+    + `<th class="num">% of setpoint</th>${shadowHead}</tr></thead><tbody>${rows}</tbody></table>${calibrationNote(m.calibration)}`;
 }
 
 // Several runs side by side: one column per run ("K · %"), one row per metric.

@@ -8,7 +8,7 @@ import { termText } from "./glossary.js";
 
 export function addChartCard(id, title, term = null, { wide = false } = {}) {
   const card = document.createElement("div");
-  card.className = `card${wide ? " wide-extra" : ""}`;
+  card.className = `card extra${wide ? " wide-extra" : ""}`;
   card.id = `card-${id}`;
   const h = document.createElement("h3");
   h.className = "card-title";

@@ -1,6 +1,7 @@
 // The shown run: its card (what it is, files, metrics), the live controls, and its history: a page that
 // connects to a running run reads everything so far (GET .../series), then continues with the stream.
 import { api } from "./api.js";
+import { describeChoice, setEstimatorForm } from "./estimatorform.js";
 import { addEvents, clearEvents, noteStatus } from "./events.js";
 import { setLiveOscillation } from "./inputs.js";
 import { metricsTable } from "./metrics.js";
@@ -55,6 +56,8 @@ function renderRunInfo(run) {
     <div><span class="badge ${esc(run.status)}">${esc(run.status)}</span>${run.error ? ` <span class="msg err">${esc(run.error)}</span>` : ""}
       · started ${new Date((run.started_at || run.created_at) * 1000).toLocaleString()}</div>
     <div>reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})</div>
+    ${sc.estimator ? `<div class="muted">estimator ${esc(describeChoice(sc.estimator))}${sc.estimator.shadow
+    ? ` · shadow ${esc(describeChoice(sc.estimator.shadow))}` : ""}</div>` : ""}
     <div class="muted">${sc.duration} s · TC4 at (${sc.tc4.join(", ")}) · ${describeFurnace(run)}
       · <button class="link" id="reuse-btn" title="copy this run's scenario into the New run form">use as new run</button></div>`;
   $("run-files").innerHTML = fileLinks(run);
@@ -77,6 +80,8 @@ function reuseScenario(sc) {
   set("amplitude", sc.oscillation.amplitude); set("period", sc.oscillation.period); set("tc4x", sc.tc4[0]); set("tc4y", sc.tc4[1]);
   set("tc_noise", sc.tc_noise); set("seed", sc.seed); set("m_eps", sc.mismatch.emissivity); set("m_alpha", sc.mismatch.alpha);
   set("m_lamp", sc.mismatch.lamp_efficiency);
+  if (sc.truth) set("truth", sc.truth);
+  setEstimatorForm(sc.estimator || state.furnace.defaults.estimator); // a run from before the choice: the default
   form.dispatchEvent(new Event("input"));
   showMsg(`the form holds the scenario of run ${state.runId}`, false, "start-msg");
 }

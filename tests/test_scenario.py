@@ -10,6 +10,8 @@ from twin.scenario import PointsReference, Scenario, TransitionReference
 
 def test_defaults_are_the_product_contract():
     s = json.loads(Scenario().to_json())
+    # the optional fields of product.md ("More scenario fields"), with their defaults
+    assert s.pop("estimator") == {"motion": "position_aware", "calibrate": True, "shadow": None}
     assert s == {
         "reference": {"setpoint": 1100.0, "t_E": 120.0},
         "duration": 240.0,

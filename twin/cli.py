@@ -88,6 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seeds", type=int, default=5, help="seeds per experiment (0 .. N-1; TC noise and biases)")
     s.add_argument("--truth", choices=("independent", "shared"), default="independent",
                    help="the simulated furnace: its own [truth] (default) or the model's plant, to compare")
+    s.add_argument("--estimator", choices=("default", "paper", "both"), default="default",
+                   help="the twin's default estimator, the paper's (averaged model, no calibration), or both "
+                        "side by side (the paper's runs in OUT/paper_estimator)")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")

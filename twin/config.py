@@ -288,6 +288,7 @@ class FE(_Section):
     y_nodes: tuple[float, ...] = Field(min_length=3)
     reference_temperature: float = Field(gt=0)
     capacity_range: tuple[float, float]
+    heat_capacity: Literal["constant", "temperature"] = "constant"
 
     @model_validator(mode="after")
     def _nodes(self) -> Self:
@@ -310,6 +311,40 @@ class EKFWeights(_Section):
     innovation_gate: float = Field(gt=0)
     jacobian_tolerance: float = Field(ge=0)
     covariance_precision: Literal["single", "double"]
+
+
+class ParameterValues(_Section):
+    """One value per calibration parameter (relative deviations of the model, like ``mismatch``)."""
+
+    lamp_efficiency: float = Field(ge=0)
+    emissivity: float = Field(ge=0)
+    convection: float = Field(ge=0)
+
+
+class ParameterBounds(_Section):
+    lamp_efficiency: tuple[float, float]
+    emissivity: tuple[float, float]
+    convection: tuple[float, float]
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Self:
+        for name in ("lamp_efficiency", "emissivity", "convection"):
+            lo, hi = getattr(self, name)
+            if not lo < 0.0 < hi:
+                raise ValueError(f"{name}: bounds must enclose 0 (the nominal model), got [{lo}, {hi}]")
+        return self
+
+
+class Calibration(_Section):
+    """Joint state and parameter estimation (twin.estimation.joint): which parameters, priors, bounds."""
+
+    parameters: tuple[Literal["lamp_efficiency", "emissivity", "convection"], ...]
+    prior_sigma: ParameterValues
+    random_walk: ParameterValues  # 1/sqrt(s): the parameter's assumed drift rate
+    bounds: ParameterBounds
+    controller_follows: bool = False  # re-plan the controller's model with the calibrated parameters
+    replan_threshold: float = Field(gt=0)  # a parameter move (relative) that re-plans the controller
+    replan_interval: float = Field(ge=0)  # s between two re-plans for the calibration
 
 
 class FeedforwardWeights(_Section):
@@ -393,6 +428,7 @@ class FurnaceConfig(_Section):
     sampling: Sampling
     fe: FE
     ekf: EKFWeights
+    calibration: Calibration
     feedforward: FeedforwardWeights
     lqg: LQGWeights
     truth: Truth

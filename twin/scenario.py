@@ -220,6 +220,28 @@ class FaultSpec(_Model):
         return f"{self.target} {self.kind}" + ("" if self.value is None else f" {self.value:g}{unit}")
 
 
+class EstimatorChoice(_Model):
+    """How the twin estimates (issue 11): the model's motion and whether it calibrates parameters.
+
+    ``motion="averaged", calibrate=False`` is the paper's EKF (section 3.2, eq. 11); the defaults are
+    the best measured configuration (README, campaign).
+    """
+
+    motion: Literal["averaged", "position_aware"] = Field(
+        "position_aware", description="'averaged' (paper, eq. 11) or 'position_aware' (model at eta(t_j))")
+    calibrate: bool = Field(True, description="learn lamp efficiency and emissivity online (joint EKF)")
+
+
+#: The paper's estimator, one setting away from the default.
+PAPER_ESTIMATOR = EstimatorChoice(motion="averaged", calibrate=False)
+
+
+class EstimatorSpec(EstimatorChoice):
+    """The run's estimator and, optionally, a shadow estimator on the same TC data (shown beside it)."""
+
+    shadow: EstimatorChoice | None = Field(None, description="a second estimator to compare, or null")
+
+
 class SimulatedPlant(_Model):
     """The run's furnace is simulated in process (``SimulatedFurnace``): any speed."""
 
@@ -260,6 +282,7 @@ class Scenario(_Model):
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
     faults: list[FaultSpec] = Field(default_factory=list, max_length=lim.MAX_FAULTS,
                                     description="faults injected into the simulated furnace at run time")
+    estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
     truth: lim.TruthKind = Field(
         lim.TRUTH_DEFAULT,
         description="'independent': the simulated furnace differs from the twin's model as its furnace file's "

@@ -79,6 +79,16 @@ def glossary(cfg: FurnaceConfig) -> dict[str, Any]:
         "mismatch": "plant mismatch: how much the simulated furnace deviates from the twin's model (relative, "
                     "0.05 = 5 % higher), to test robustness.",
         "speed": "speed: 'max' runs as fast as the computer can; a number is a real-time factor (2 = twice real time).",
+        "estimator": "estimator: how the twin turns TC1-TC3 into the field. position-aware: the model at the "
+                     "specimen's position eta(t) (the paper's EKF averages it over the oscillation period); "
+                     "calibrating: it also learns lamp efficiency and emissivity while the reference holds. "
+                     "The paper's: averaged, no calibration.",
+        "shadow": "shadow estimator: a second estimator on the same TC readings and powers, only to compare; it "
+                  "never drives the lamps. Its TC4 error and its field minus the estimate are charted beside "
+                  "the first one's.",
+        "calibration": "calibration: how much the furnace differs from the twin's model as the estimator learns "
+                       "it, in % (-10 % = lamps 10 % weaker than the model); the band is +-1 standard deviation. "
+                       "Effective values: they also absorb what the model gets wrong in other ways.",
         "plant": "the furnace of a run: simulated in process (any speed, its noise, seed, deviations and truth), or a "
                  "furnace over OPC UA (a real one, or furnace-twin emulate): real time on its clock, no truth, samples "
                  "that come late counted. The server connects only to the endpoints its settings allow.",

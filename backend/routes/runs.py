@@ -199,10 +199,10 @@ async def change_faults(run_id: str, manager: ManagerDep, faults: FaultsBody, re
     return _change_result(await manager.change(run_id, "faults", faults), response)
 
 
-@router.get("/{run_id}/metrics", response_model=dict[str, float | None],
+@router.get("/{run_id}/metrics", response_model=dict[str, Any],
             responses={404: {"description": "no such run"},
                        409: {"description": "no metrics yet (the run is going or ended before any sample)"}})
-def get_metrics(run_id: str, manager: ManagerDep) -> dict[str, float | None]:
+def get_metrics(run_id: str, manager: ManagerDep) -> dict[str, Any]:
     """The run's metrics (product.md); windows the run did not reach are null."""
     row = manager.run(run_id)
     if row.metrics is None:

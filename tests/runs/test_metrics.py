@@ -132,7 +132,22 @@ def test_a_run_without_samples_gives_nan_everywhere():
     for k in ("t", "T_ref", "T_mean_hat", "tc", "tc_hat", "t_field", "field_hat", "field_true"):
         ts[k] = ts[k][:0]
     m = compute_metrics(ts)
-    assert set(m) == set(METRIC_KEYS) and all(np.isnan(v) for v in m.values()), m
+    # product.md's keys, and a simulation's true transient mean error (issue 11), all NaN
+    assert set(m) == {*METRIC_KEYS, "true_mean_error_transient_max"} and all(np.isnan(v) for v in m.values()), m
+
+
+def test_true_transient_mean_error_is_that_of_the_true_field():
+    """Oracle: a true field 22 K above the reference in the transient, 5.5 K in the steady window (2 % and
+    0.5 % of 1100 K); the estimate is exact, so only the true-field metrics see it; no truth, no key."""
+    ts = _series()
+    transient = window(ts["t"], ts["t_E"], "transient")
+    ts["field_true"] = ts["field_true"] + np.where(transient, 22.0, 5.5)[:, None, None]
+    m = compute_metrics(ts)
+    assert m["true_mean_error_transient_max"] == pytest.approx(0.02)
+    assert m["true_mean_error_steady_max"] == pytest.approx(0.005)
+    assert m["mean_error_transient_max"] == pytest.approx(0.0)
+    del ts["field_true"]
+    assert "true_mean_error_transient_max" not in compute_metrics(ts)
 
 
 # ------------------------------------------------------------------ properties (hypothesis)
@@ -201,3 +216,25 @@ def test_points_reference_change_takes_its_last_point():
 
     w = windows_from(120.0, 1100.0, [(50.0, "reference", {"points": [[10.0, 900.0], [40.0, 950.0]]})])
     assert (w.t0, w.t_E, w.setpoint, w.steady) == (50.0, 40.0, 950.0, (110.0, 130.0))
+
+
+def test_shadow_metrics_are_those_of_its_own_outputs():
+    """A run with a shadow estimator (issue 11): ``shadow`` = the metrics of the same run with the shadow's
+    outputs in place of the primary's (oracle: that run built by hand); the primary's keep their values.
+    A calibrating primary's parameters end up in ``calibration``, not in the shadow's metrics."""
+    ts = _series()
+    ts["shadow_T_mean_hat"] = ts["T_mean_hat"] + 11.0  # 1 % everywhere
+    ts["shadow_tc_hat"] = ts["tc_hat"] - 5.5  # 0.5 % at every TC
+    ts["shadow_field_hat"] = ts["field_hat"] + 2.2
+    ts["parameters"] = np.tile([-0.1, -0.05, np.nan], (len(ts["t"]), 1))
+    ts["parameter_sigma"] = np.tile([0.01, 0.02, np.nan], (len(ts["t"]), 1))
+    m = compute_metrics(ts)
+    by_hand = _series()
+    by_hand.update(T_mean_hat=ts["shadow_T_mean_hat"], tc_hat=ts["shadow_tc_hat"], field_hat=ts["shadow_field_hat"])
+    assert m["shadow"] == pytest.approx(compute_metrics(by_hand))
+    assert m["shadow"]["mean_error_steady_max"] == pytest.approx(0.01)
+    assert m["shadow"]["tc4_error_steady_max"] == pytest.approx(0.005)
+    assert m["mean_error_steady_max"] == pytest.approx(0.0)  # the primary's own
+    assert m["calibration"] == {"lamp_efficiency": {"value": -0.1, "sigma": 0.01},
+                                "emissivity": {"value": -0.05, "sigma": 0.02}}
+    assert "calibration" not in m["shadow"]

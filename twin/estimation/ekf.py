@@ -118,8 +118,13 @@ def _gain(S: Array, PCt: Array) -> Array:
     return np.asarray(x, float).T
 
 
-def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -> tuple[EKFState, UpdateInfo]:
+def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float,
+               consider: int = 0) -> tuple[EKFState, UpdateInfo]:
     """Measurement update (13) in Joseph form, leaving out missing or gated readings.
+
+    ``consider`` > 0: the last ``consider`` entries of the state are "consider" states (Schmidt-Kalman):
+    their rows of the gain are 0, so the readings do not move them, while their uncertainty still widens the
+    others' gain through the cross-covariance; the Joseph form keeps P right for such a gain.
 
     Parameters
     ----------
@@ -161,6 +166,8 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float) -
     else:
         nu, PCt, S = innov[used], PCt_full[:, used], S_full[np.ix_(used, used)]
     gain = _gain(S, PCt)
+    if consider:
+        gain[-consider:] = 0.0
     if all_used:
         gain_full = gain
     else:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -37,24 +37,14 @@ import scipy.sparse
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.model.averaging import averaged_matrices
 from twin.model.fe import FEModel
+from twin.model.tables import ModelTables, Parameters, RadiationLike, model_tables
 from twin.numerics import damped_newton
-from twin.physics.boundary import face_loss_coefficients
+from twin.physics.motion import average_weights
 from twin.scenario import OscillationSpec
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
-
-
-class RadiationLike(Protocol):
-    """The parts of :class:`twin.radiation.RadiationModel` the FE model uses (docs/interfaces.md)."""
-
-    eta_nodes: Array
-    P1: Array
-    P2: Array
-    wall_temperatures: Array
-    lamp_flux_max: Array
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,29 +168,22 @@ def discrete_model(
     radiation: RadiationLike,
     oscillation: OscillationSpec | None = None,
     fe: FEModel | None = None,
+    *,
+    tables: ModelTables | None = None,
+    parameters: Parameters | None = None,
 ) -> DiscreteModel:
     """Build the discrete-time model (12a), time averaged (11) if ``oscillation`` is enabled.
 
     Parameters
     ----------
     cfg : furnace configuration (FE grid, t_s, boundary data, lamp groups)
-    radiation : the radiation model of the plant (P1, P2 at the eta positions)
+    radiation : the twin's radiation model (P1, P2 at the eta positions)
     oscillation : eta(t) = amplitude sin(2 pi t / period); None or disabled = fixed at eta = 0
     fe : a prebuilt :class:`FEModel` of the same cfg to reuse (optional)
+    tables : prebuilt per-position terms (:func:`twin.model.tables.model_tables`) to reuse (optional)
+    parameters : calibrated deviations (lamp efficiency, emissivity, convection) of the model
     """
-    fe = FEModel(cfg) if fe is None else fe
-    s = cfg.specimen
-    Ns = s.n_states
-    P1, P2 = averaged_matrices(radiation, oscillation)
-    Tw4 = np.asarray(radiation.wall_temperatures, float) ** 4
-    d, b = face_loss_coefficients(cfg)
-    lamp = np.asarray(radiation.lamp_flux_max, float)[:, None] * np.asarray(cfg.group_matrix, float)
-    G, Mt, Bs = fe.G, fe.M_theta, s.thickness
-    rhoM = s.density * fe.M
-    lu = scipy.linalg.lu_factor(rhoM)
-    L = scipy.linalg.lu_solve(lu, fe.K - fe.Gamma - G.T @ (d[:, None] * Mt) / Bs)
-    A = scipy.linalg.lu_solve(lu, -G.T @ P1[:, :Ns] / Bs)
-    B = scipy.linalg.lu_solve(lu, -G.T @ (P2 @ lamp) / Bs)
-    c = scipy.linalg.lu_solve(lu, fe.gamma0 - G.T @ (P1[:, Ns:] @ Tw4 - b) / Bs)
-    log.debug("discrete_model: n=%d, oscillation=%s", fe.n, oscillation)
-    return DiscreteModel(fe=fe, t_s=cfg.sampling.t_s, L=L, A=A, B=B, c=c, oscillation=oscillation)
+    tables = model_tables(cfg, radiation, fe) if tables is None else tables
+    L, A, B, c = tables.terms(average_weights(tables.eta_nodes, oscillation), parameters)
+    log.debug("discrete_model: n=%d, oscillation=%s, parameters=%s", tables.n, oscillation, parameters)
+    return DiscreteModel(fe=tables.fe, t_s=tables.t_s, L=L, A=A, B=B, c=c, oscillation=oscillation)

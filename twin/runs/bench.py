@@ -5,8 +5,10 @@
 | precompute_s | exchange factors for all eta positions, cold cache |
 | truth_precompute_s | the same for the simulated furnace's own table (symmetric trace of [truth.radiation]) |
 | plant_rtf | simulated s per wall s, full-order plant with oscillation, open loop |
-| closed_loop_rtf | the same for plant + EKF + LQG over a whole run (feedforward solved) |
-| step_ms | EKF update + controller per sample, median |
+| closed_loop_rtf | the same for plant + EKF + LQG over a whole run (feedforward solved), default estimator |
+| step_ms | EKF update + controller per sample, median, default estimator |
+| closed_loop_rtf_paper, step_ms_paper | the same with the paper's estimator (averaged, no calibration) |
+| closed_loop_speed_ratio | closed_loop_rtf / closed_loop_rtf_paper (target >= 0.8) |
 | ocp_s | feedforward OCP solve for a whole run |
 | replan_s | re-plan after a reference change, warm-started |
 | stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
@@ -33,21 +35,37 @@ from twin.config import FurnaceConfig
 log = logging.getLogger(__name__)
 
 
-def closed_loop_figures(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> dict[str, float]:
-    """closed_loop_rtf over a whole default run (plan solved beforehand) and step_ms.
+def closed_loop_figures(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0,
+                        repeats: int = 3) -> dict[str, float]:
+    """closed_loop_rtf over a whole default run (plan solved beforehand) and step_ms, for the default
+    estimator and for the paper's configuration (averaged, no calibration), interleaved and repeated.
 
-    step_ms times the estimator (update + predict) and the controller per sample,
-    the part of a step the twin adds to the plant.
+    step_ms times the estimator (update + predict) and the controller per sample, the part of a step
+    the twin adds to the plant.  Re-plans during the run (a calibration moving past its threshold)
+    are solved in the background as the server does (``background=True``); the medians of
+    ``repeats`` runs are reported, and ``closed_loop_speed_ratio`` = default / paper.
     """
     from twin.runs.loop import ClosedLoop
-    from twin.scenario import Scenario
+    from twin.scenario import PAPER_ESTIMATOR, Scenario
 
-    loop = ClosedLoop(cfg, Scenario(duration=duration), radiation)  # the OCP is solved here
-    t0 = time.perf_counter()
-    for _ in loop.run():
-        pass
-    wall = time.perf_counter() - t0
-    return {"closed_loop_rtf": duration / wall, "step_ms": float(np.median(loop.compute_ms))}
+    runs: dict[str, list[tuple[float, float]]] = {"": [], "_paper": []}
+    for _ in range(repeats):
+        for suffix, estimator in (("", None), ("_paper", PAPER_ESTIMATOR)):
+            scenario = Scenario(duration=duration) if estimator is None else Scenario(
+                duration=duration, estimator=estimator.model_dump())
+            loop = ClosedLoop(cfg, scenario, radiation, background=True)  # the OCP is solved here
+            t0 = time.perf_counter()
+            for _ in loop.run():
+                pass
+            wall = time.perf_counter() - t0
+            loop.close()
+            runs[suffix].append((duration / wall, float(np.median(loop.compute_ms))))
+    out: dict[str, float] = {}
+    for suffix, values in runs.items():
+        out[f"closed_loop_rtf{suffix}"] = float(np.median([v[0] for v in values]))
+        out[f"step_ms{suffix}"] = float(np.median([v[1] for v in values]))
+    out["closed_loop_speed_ratio"] = out["closed_loop_rtf"] / out["closed_loop_rtf_paper"]
+    return out
 
 
 def plant_rtf(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> float:

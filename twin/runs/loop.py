@@ -62,8 +62,10 @@ from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.control.plan import plain_status
 from twin.furnace.interface import FaultInjectable, Furnace, Readings
+from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
+from twin.runs.estimators import RunEstimators
 from twin.runs.fault_ride_through import FaultRideThrough, faulty_model, reach_note
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
@@ -83,8 +85,10 @@ class _Plan:
     model: Any
     plan: Any
     gains: Any
-    nominal: Any = None
-    note: str = ""
+    oscillation: OscillationSpec
+    parameters: Parameters  # the calibrated deviations the controller's model was built with
+    nominal: Any = None  # ``model`` without the lamp groups' faults (the fault detector's)
+    note: str = ""  # what the groups left can hold, when the plan models a lamp group's lost power
 
 
 class ClosedLoop(FaultRideThrough):
@@ -115,8 +119,8 @@ class ClosedLoop(FaultRideThrough):
         budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.lqg import Controller
-        from twin.estimation.ekf import Estimator
         from twin.estimation.fault_detection import FaultDetector
+        from twin.model.tables import model_tables
         from twin.radiation import radiation_model
 
         self.cfg = cfg
@@ -132,6 +136,7 @@ class ClosedLoop(FaultRideThrough):
 
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
         self.furnace: Furnace = furnace
+        self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
         self._budget = budget
         self._replanner = Replanner(background, budget)
@@ -158,11 +163,12 @@ class ClosedLoop(FaultRideThrough):
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, previous=None, budget=budget)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
-        self.estimator = Estimator(self._ctl.nominal, cfg, theta0)
+        self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
+        self.estimator = self.estimators.primary  # the one that feeds the controller
         self.detector = FaultDetector(cfg, self._ctl.nominal)
         self._motion_for_detection(0.0)
 
@@ -196,7 +202,7 @@ class ClosedLoop(FaultRideThrough):
         from twin.control.reference import reachable_range
         from twin.model.discrete import discrete_model
 
-        return reachable_range(discrete_model(self.cfg, self.radiation, None), self.cfg)
+        return reachable_range(discrete_model(self.cfg, self.radiation, None, tables=self.tables), self.cfg)
 
     def _make_reference(self, spec: Reference, T_initial: float, t_start: float) -> Callable[[Any], Any]:
         """T_ref(t) of run time; raises ValueError (ReferenceError) for unreachable temperatures."""
@@ -206,13 +212,15 @@ class ClosedLoop(FaultRideThrough):
 
     def _plan(
         self, spec: OscillationSpec, theta: Array, t0: float, ref_fn: Callable[[Any], Any], previous: Any,
-        budget: PlanBudget | None = None,
+        parameters: Parameters, budget: PlanBudget | None = None,
     ) -> _Plan:
-        """Model, feedforward and gains for the rest of the run from t0 (eqs. 11, 18-29)."""
+        """Model (averaged over the motion, eq. 11, with the calibrated parameters), feedforward and gains
+        for the rest of the run from t0 (eqs. 18-29)."""
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
-        nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None)
+        nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
+                                 parameters=parameters)
         gains_now = self._lamp_gains.copy()
         model = faulty_model(nominal, gains_now)  # the groups as the fault detection believes them
         faulty = model is not nominal
@@ -227,7 +235,7 @@ class ClosedLoop(FaultRideThrough):
             rest = np.append(np.arange(t0, self.n_steps * self.t_s, 1.0), self.n_steps * self.t_s)
             T_end = float(np.max(np.asarray(ref_fn(rest), float)))  # the hottest the rest of the run asks for
             note = reach_note(self.cfg, model, gains_now, T_end)
-        return _Plan(model, plan, gains, nominal, note)
+        return _Plan(model, plan, gains, spec, parameters, nominal, note)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> Future[float]:
@@ -260,10 +268,11 @@ class ClosedLoop(FaultRideThrough):
         wanted_ref = self._wanted_reference
         ref_fn = wanted_ref[1] if wanted_ref is not None else self._ref_fn
         previous = self._ctl.plan
+        parameters = self.estimator.parameters  # the controller's model follows the calibration
         self._events.append(description)
 
         def job(budget: PlanBudget) -> _Plan:
-            return self._plan(spec, theta, t0, ref_fn, previous, budget=budget)
+            return self._plan(spec, theta, t0, ref_fn, previous, parameters, budget=budget)
 
         def install(ctl: _Plan, kinds: list[str]) -> float:
             t = self.j * self.t_s  # the sample about to be computed is the first on the new plan
@@ -288,6 +297,7 @@ class ClosedLoop(FaultRideThrough):
             how = f" ({describe(spec).removeprefix('on (')}" if spec.enabled else ""  # " (48 mm, 18 s)"
             said = {"reference": f"reference changed at t = {t:.1f} s{ref_words}",
                     "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}",
+                    "calibration": f"calibration at t = {t:.1f} s",
                     "lamps": f"{self._lamps_change} from t = {t:.1f} s"}
             # a plan that models a lamp group's lost power: the integrator, which made up for it, starts at 0
             self._install(ctl, "; ".join(said.get(k, k) for k in kinds), fresh_integrator="lamps" in kinds)
@@ -305,15 +315,15 @@ class ClosedLoop(FaultRideThrough):
     def _install(self, ctl: _Plan, description: str, fresh_integrator: bool = False) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
         models what the integrator was making up for (a lamp group's lost power): then it starts at 0."""
-        motion_changed = ctl.nominal.oscillation != self._ctl.nominal.oscillation
+        motion_changed = ctl.oscillation != self._ctl.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
         if fresh_integrator:
             from twin.control.lqg import IntegratorState
 
             self.controller.state = IntegratorState()
-        self.estimator.set_model(ctl.nominal)
-        if motion_changed:
+        if motion_changed:  # the averaged estimators switch to the new period average with the controller
+            self.estimators.switch_motion(ctl.oscillation if ctl.oscillation.enabled else None)
             self.detector.set_model(ctl.nominal)
         self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}"
                             + (f"; {ctl.note}" if ctl.note else ""))
@@ -350,10 +360,13 @@ class ClosedLoop(FaultRideThrough):
             c0 = time.perf_counter()
             self._motion_for_detection(t)
             y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)
-            theta_prior = self.estimator.state.theta
-            state = self.estimator.update(y)  # eq. 13 (faulty readings gated inside)
-            theta = state.theta
+            theta_prior = self.estimator.state.theta.copy()
+            holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
+            theta, shadow = self.estimators.update(y, learn=holding)  # eq. 13 (faulty readings gated inside)
             self._on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
+            due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
+            if due is not None:  # the controller's model follows the calibration (re-planned like a change)
+                self._request("calibration", due)
             ctl = self._ctl
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
@@ -371,6 +384,7 @@ class ClosedLoop(FaultRideThrough):
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
+                **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
             problem = self._guard.check(snap, left_out=self.detector.excluded)
             if problem is not None:  # nothing of this sample reaches the furnace or the record
@@ -381,7 +395,8 @@ class ClosedLoop(FaultRideThrough):
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimator.predict(self._lamp_gains * snap.u)  # what the lamps are believed to deliver
+            # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed)
+            self.estimators.predict(self._lamp_gains * snap.u, eta)
             self.detector.predict(snap.u, theta, self.estimator.state.theta)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
@@ -415,5 +430,5 @@ class ClosedLoop(FaultRideThrough):
         with self._lock:
             return self.record.arrays()
 
-    def metrics(self) -> dict[str, float]:
+    def metrics(self) -> dict[str, Any]:
         return self.record.metrics()

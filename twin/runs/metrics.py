@@ -43,6 +43,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.model.tables import PARAMETERS  # the order of the record's ``parameters``
 from twin.physics.fillet import Fillet
 from twin.runs.record import load_changes
 
@@ -60,6 +61,30 @@ METRIC_KEYS = (
     "true_mean_error_steady_max",
     "field_estimation_error_steady_max",
 )
+#: the estimator outputs a shadow estimator records under ``shadow_<key>`` (twin.runs.record)
+SHADOW_OUTPUTS = ("T_mean_hat", "tc_hat", "field_hat")
+
+
+def oscillation_amplitude(t: Array, e: Array, period: float) -> float:
+    """Amplitude of the component of e(t) at the frequency 1/period: sqrt(a^2 + b^2) of the least-squares
+    fit e ~ a sin(w t) + b cos(w t) + c, w = 2 pi / period (NaN with fewer than 3 finite samples)."""
+    ok = np.isfinite(e)
+    if ok.sum() < 3:
+        return float("nan")
+    w = 2.0 * np.pi / period
+    X = np.column_stack([np.sin(w * t[ok]), np.cos(w * t[ok]), np.ones(int(ok.sum()))])
+    (a, b, _), *_ = np.linalg.lstsq(X, e[ok], rcond=None)
+    return float(np.hypot(a, b))
+
+
+def _oscillation_period(ts: Mapping[str, Any]) -> float | None:
+    """The scenario's oscillation period (s) if the run oscillated (from the recorded scenario and eta)."""
+    import json
+
+    if "scenario" not in ts or not np.any(np.asarray(ts.get("eta", [0.0])) != 0.0):
+        return None
+    osc = json.loads(str(ts["scenario"])).get("oscillation") or {}
+    return float(osc["period"]) if osc.get("enabled") and osc.get("period") else None
 
 
 @dataclass(frozen=True)
@@ -170,13 +195,13 @@ def _mean(values: Array, sel: NDArray[np.bool_]) -> float:
     return float(np.mean(v)) if v.size else float("nan")
 
 
-def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
+def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     """The product.md metrics from a time-series mapping (the ``timeseries.npz`` layout).
 
     Needs ``t, T_ref, T_mean_hat, tc (n,4), tc_hat (n,4), t_field, field_hat, x, y, L_s, W_s,
     t_E, setpoint`` and, for the ``true_*`` metrics, ``field_true``; the ``change_*`` of live changes
-    move the windows (:func:`windows_of`).  Windows without samples give
-    NaN (a run stopped early).
+    move the windows (:func:`windows_of`).  Windows without samples give NaN (a run stopped early).
+    Oscillating, calibrating and shadowed runs get more keys (:func:`_extras`).
     """
     t = np.asarray(ts["t"], float)
     t_E0 = float(ts["t_E"])  # the scenario's: tc123_error_max counts from its first tenth
@@ -203,8 +228,7 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
     else:  # no truth (a real furnace), or no samples
         sup_true = true_mean_err = est_err = np.full(tf.size, np.nan)
     trf, stf = window(tf, t_E, "transient", t0), window(tf, t_E, "steady", t0)
-
-    return {
+    out: dict[str, Any] = {
         "mean_error_transient_max": _max(mean_err, tr),
         "mean_error_steady_max": _max(mean_err, st),
         "tc123_error_max": _max(tc_err[:, :3].max(axis=1) if t.size else np.zeros(0), after),
@@ -216,9 +240,37 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
         "true_mean_error_steady_max": _max(true_mean_err, stf),
         "field_estimation_error_steady_max": _max(est_err, stf),
     }
+    if "field_true" in ts:  # the transient seen in the true field: what the estimated mean error hides
+        out["true_mean_error_transient_max"] = _max(true_mean_err, trf)
+    return _extras(ts, out, t, st, tc_err)
 
 
-def run_metrics(ts: Mapping[str, Any]) -> dict[str, float]:
+def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc_err: Array,
+            ) -> dict[str, Any]:
+    """The metrics a run has only in some configurations (``true_mean_error_transient_max``, a simulated
+    furnace's, is added before): ``tc4_error_oscillation_amplitude`` (an oscillating
+    run: the TC4 error's component at the oscillation frequency over the steady window, relative),
+    ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run) and ``shadow`` (the shadow
+    estimator's metrics)."""
+    period = _oscillation_period(ts)
+    if period is not None and t.size:
+        out["tc4_error_oscillation_amplitude"] = oscillation_amplitude(t[st], tc_err[st, 3], period)
+    if "parameters" in ts and len(ts["parameters"]):
+        values, sigma = np.asarray(ts["parameters"][-1], float), np.asarray(ts["parameter_sigma"][-1], float)
+        out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
+                              for i, name in enumerate(PARAMETERS) if np.isfinite(values[i])}
+    if all(f"shadow_{k}" in ts for k in SHADOW_OUTPUTS):
+        # the run as the shadow saw it: its outputs in place of the primary's, no shadow of its own (else
+        # this would recurse) and not the primary's calibration
+        shadow = {k: v for k, v in ts.items()
+                  if not k.startswith("shadow_") and k not in ("parameters", "parameter_sigma")}
+        for k in SHADOW_OUTPUTS:
+            shadow[k] = ts[f"shadow_{k}"]
+        out["shadow"] = compute_metrics(shadow)
+    return out
+
+
+def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     """What a run reports: :func:`compute_metrics` and ``late_samples`` (as a float, like the others)."""
     return {**compute_metrics(ts), "late_samples": float(late_samples(ts))}
 

@@ -11,6 +11,9 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   the end of the metrics' windows, moved by a live reference change), then every ``field_every``-th (the
   loop: one per second, the least product.md allows), so a long run's memory grows by the scalars and
   about 3.5 kB per second;
+* with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
+  efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
+  ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
 * events: ``event_t`` (s), ``event_text`` and ``event_level`` (``info``, ``warn`` or ``error``), the
   run's own reports (re-plans, switches; the server adds its own: start, end, changes, saturation);
 * live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
@@ -56,7 +59,10 @@ Array = NDArray[np.float64]
 
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
-FIELD_SERIES = ("field_hat", "field_true")
+FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
+#: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
+#: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
+OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
 #: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
 TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 EVENT_LEVELS = ("info", "warn", "error")
@@ -161,6 +167,11 @@ class Snapshot:
     true_mean: float | None
     true_inhomogeneity: float | None
     events: tuple[str, ...] = ()
+    parameters: Array | None = None  # (3,) calibrated deviations (lamp efficiency, emissivity, convection)
+    parameter_sigma: Array | None = None  # (3,) their standard deviations
+    shadow_T_mean_hat: float | None = None  # the shadow estimator's fillet mean, TCs and field
+    shadow_tc_hat: Array | None = None
+    shadow_field_hat: Array | None = None
     tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
     late_samples: int = 0  # samples of the run so far with a reading that did not come in time
 
@@ -239,6 +250,7 @@ class RunRecord:
         self._columns: dict[str, _Column] = {}
         self._fields: dict[str, _Column] = {}  # t_field and the field series
         self._since_field = 0
+        self._optional: tuple[str, ...] = ()
         self._events: list[RunEvent] = []
         self._changes: list[RunChange] = []
 
@@ -251,6 +263,14 @@ class RunRecord:
         values["tc_status"] = [TC_STATUS_CODES[st] for st in snap.tc_status] if snap.tc_status else [0] * len(snap.tc)
         if self.has_truth and snap.field_true is None:
             raise ValueError("this record keeps a true field, the snapshot has none")
+        if not self._columns:  # the first sample decides which optional series the run has
+            self._optional = tuple(k for k in OPTIONAL_SERIES if getattr(snap, k) is not None)
+        for k in self._optional:
+            v = getattr(snap, k)
+            if v is None:
+                raise ValueError(f"this record keeps {k}, the snapshot has none")
+            if k not in FIELD_SERIES:  # the fields are kept below, thinned like the others
+                values[k] = v
         if not self._columns:
             for k, v in values.items():
                 self._columns[k] = _Column(np.shape(v), np.int8 if k == "tc_status" else float)
@@ -262,6 +282,9 @@ class RunRecord:
             fields_now: dict[str, Any] = {"t_field": snap.t, "field_hat": snap.field_hat}
             if self.has_truth:
                 fields_now["field_true"] = snap.field_true
+            for k in self._optional:
+                if k in FIELD_SERIES:  # a shadow estimator's field
+                    fields_now[k] = getattr(snap, k)
             if not self._fields:
                 for k, v in fields_now.items():
                     self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
@@ -291,10 +314,13 @@ class RunRecord:
         col = self._columns.get("tc_status")
         out["tc_status"] = col.view().copy() if col is not None else np.zeros((0, 4), np.int8)
         for k in FIELD_SERIES:
-            if k == "field_true" and not self.has_truth:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             col = self._fields.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
+        for k in self._optional:
+            if k not in FIELD_SERIES:
+                out[k] = self._columns[k].view().copy()
         t_field = self._fields.get("t_field")
         out["t_field"] = t_field.view().copy() if t_field is not None else np.zeros(0)
         out.update(event_arrays(self._events))
@@ -333,7 +359,7 @@ class RunRecord:
                 out[k] = col.view()[first:].copy()
         out.setdefault("t_field", np.zeros(0))
         for k in FIELD_SERIES:
-            if k == "field_true" and not self.has_truth:
+            if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
         if events_from is None:
@@ -344,7 +370,7 @@ class RunRecord:
         out.update(change_arrays(self._changes[changes_from:]))
         return out
 
-    def metrics(self) -> dict[str, float]:
+    def metrics(self) -> dict[str, Any]:
         """The run metrics of product.md and ``late_samples`` (:func:`twin.runs.metrics.run_metrics`)."""
         from twin.runs.metrics import run_metrics
 

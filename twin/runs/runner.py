@@ -129,8 +129,11 @@ def execute_run(
     return result
 
 
-def _json_safe(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+def _json_safe(d: Any) -> Any:
+    """Metrics as JSON values: NaN / inf (a window the run did not reach) become null, nested too."""
+    if isinstance(d, dict):
+        return {k: _json_safe(v) for k, v in d.items()}
+    return None if isinstance(d, float) and not math.isfinite(d) else d
 
 
 def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:

@@ -1,0 +1,124 @@
+// The estimators of the shown run (issue 11), three cards below the others, each shown only while the run
+// has such data (history from GET .../series, then the stream's frames):
+// - "Calibrated parameters": each learned parameter as a deviation from the model in %, with a ±1 sigma band;
+// - "TC4 error: estimate vs shadow": TC4 reading − estimate for the run's estimator and for its shadow;
+// - "Shadow − estimate": the last shadow field minus the estimated field (K), a diverging scale centred at 0.
+import { baseLayout, registerFigure } from "./charts.js";
+import { describeChoice } from "./estimatorform.js";
+import { termText } from "./glossary.js";
+import { windowShapes } from "./overlays.js";
+import { $, fmt } from "./page.js";
+import { addChartCard } from "./panels.js";
+import { emptySeries } from "./series.js";
+import { state } from "./state.js";
+
+const PARAM_WORDS = { lamp_efficiency: "lamp efficiency", emissivity: "emissivity", convection: "convection" };
+const PARAM_COLORS = { lamp_efficiency: [214, 158, 46], emissivity: [128, 90, 213], convection: [44, 122, 123] };
+const rgb = (c, a = 1) => `rgba(${c[0]}, ${c[1]}, ${c[2]}, ${a})`;
+// blue: the shadow is colder than the estimate, red: hotter, white: the same (ColorBrewer RdBu)
+const DIVERGING = [[0, "#2166ac"], [0.2, "#4393c3"], [0.4, "#d1e5f0"], [0.5, "#f7f7f7"], [0.6, "#fddbc7"],
+  [0.8, "#d6604d"], [1, "#b2182b"]];
+const ESTIMATE_COLOR = "#d62728", SHADOW_COLOR = "#1f77b4"; // the estimate's TC4 colour of the TC chart
+
+const series = () => state.series || emptySeries();
+const estimators = () => (state.run && state.run.scenario && state.run.scenario.estimator) || null;
+const tMax = (s) => (s.t.length ? s.t[s.t.length - 1] : 0);
+const windows = () => (state.run && state.run.windows) || (state.series && state.series.windows) || null;
+
+// A card shows only with its data; its figure is not drawn while hidden (charts.js skips null).
+function show(id, on) {
+  const card = $(`card-${id}`);
+  if (card && card.hidden === on) { card.hidden = !on; if (on) window.dispatchEvent(new Event("resize")); }
+  return on;
+}
+
+function parameterFigure() {
+  const s = series();
+  const names = Object.keys(s.params).filter((n) => s.params[n].v.some((v) => v !== null));
+  if (!show("param-plot", names.length > 0)) return null;
+  const data = [];
+  for (const name of names) {
+    const p = s.params[name], c = PARAM_COLORS[name] || [90, 90, 90], word = PARAM_WORDS[name] || name;
+    const v = p.v.map((x) => (x === null ? null : 100 * x));
+    const band = (sign) => p.v.map((x, k) => (x === null || p.s[k] === null ? null : 100 * (x + sign * p.s[k])));
+    data.push(
+      { x: s.t, y: band(-1), legendgroup: name, showlegend: false, hoverinfo: "skip", line: { width: 0, color: rgb(c) } },
+      { x: s.t, y: band(+1), legendgroup: name, showlegend: false, hoverinfo: "skip", line: { width: 0, color: rgb(c) },
+        fill: "tonexty", fillcolor: rgb(c, 0.2) },
+      { x: s.t, y: v, name: `${word} ±1σ`, legendgroup: name, line: { color: rgb(c), width: 1.8 },
+        customdata: p.s.map((x) => (x === null ? null : 100 * x)),
+        hovertemplate: `${word} %{y:.2f} % ± %{customdata:.2f} % at %{x:.1f} s<extra></extra>` },
+    );
+  }
+  return { data, layout: baseLayout("deviation from the model (%)", {
+    yaxis: { title: { text: "deviation from the model (%)", standoff: 4 }, zeroline: true, zerolinecolor: "#9aa5b8" } }) };
+}
+
+function tc4Figure() {
+  const s = series();
+  if (!show("shadow-tc4-plot", s.shadowTc4Err.some((v) => v !== null))) return null;
+  const est = estimators(), w = windowShapes(windows(), tMax(s));
+  const name = (who, c) => `${who}${c ? `: ${describeChoice(c)}` : ""}`;
+  return {
+    data: [
+      { x: s.t, y: s.tcErr[3], name: name("estimate", est), line: { color: ESTIMATE_COLOR, width: 1.6 },
+        hovertemplate: "estimate: %{y:.2f} K at %{x:.1f} s<extra></extra>" },
+      { x: s.t, y: s.shadowTc4Err, name: name("shadow", est && est.shadow), line: { color: SHADOW_COLOR, width: 1.6 },
+        hovertemplate: "shadow: %{y:.2f} K at %{x:.1f} s<extra></extra>" },
+    ],
+    layout: baseLayout("TC4 reading − estimate (K)", { shapes: w.shapes, annotations: w.annotations,
+      yaxis: { title: { text: "TC4 reading − estimate (K)", standoff: 4 }, zeroline: true, zerolinecolor: "#9aa5b8" } }),
+  };
+}
+
+const largest = (z) => { let m = 0; for (const row of z) for (const v of row) if (v !== null) m = Math.max(m, Math.abs(v)); return m; };
+
+// The scale: ±(largest |difference|), at least 0.1 K, rounded up to 2 significant digits.
+function symmetricRange(big) {
+  const m = Math.max(big, 0.1);
+  const step = 10 ** (Math.floor(Math.log10(m)) - 1);
+  return Math.ceil(m / step - 1e-9) * step;
+}
+
+function deltaFigure() {
+  const s = series();
+  if (!show("shadow-delta-plot", !!s.shadowDelta)) return null;
+  const fu = state.furnace, z = s.shadowDelta, big = largest(z), m = symmetricRange(big);
+  const [x0, x1, y0, y1] = fu.fillet;
+  const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
+  const f = state.lastFrame;
+  $("shadow-delta-sub").textContent = `${f ? `t = ${fmt(f.t)} s · ` : ""}max |Δ| ${fmt(big, big < 1 ? 2 : 1)} K`;
+  return {
+    data: [
+      { type: "heatmap", x: fu.x, y: fu.y, z, colorscale: DIVERGING, zmid: 0, zmin: -m, zmax: m, zsmooth: "best",
+        colorbar: { title: { text: "K", side: "right" }, thickness: 12, len: 0.95 },
+        hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>shadow − estimate %{z:.2f} K<extra></extra>" },
+      { type: "scatter", mode: "markers+text", x: tcRel.map((p) => p[0] * fu.L_s), y: tcRel.map((p) => p[1] * fu.W_s),
+        text: ["TC1", "TC2", "TC3", "TC4"], textposition: ["top center", "top center", "top center", "bottom center"],
+        textfont: { size: 10, color: "#1d2330" }, hoverinfo: "skip", showlegend: false,
+        marker: { symbol: ["circle", "circle", "circle", "diamond"], size: 8, color: ["#fff", "#fff", "#fff", "#ff4fc8"],
+          line: { color: "#000", width: 1.2 } } },
+    ],
+    layout: {
+      margin: { l: 50, r: 10, t: 6, b: 34 }, paper_bgcolor: "#fff", plot_bgcolor: "#e8ecf2", font: { size: 11, color: "#1d2330" },
+      xaxis: { title: { text: "x (m)", standoff: 2 }, range: [0, fu.L_s], constrain: "domain" },
+      yaxis: { title: { text: "y (m)", standoff: 2 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
+      shapes: [{ type: "rect", x0, x1, y0, y1, line: { color: "#56627a", width: 1.5, dash: "dash" } }],
+    },
+  };
+}
+
+// The cards (after the glossary is loaded: their help marks carry its words) and their figures.
+export function initEstimatorCharts() {
+  const term = (key, fallback) => (termText(key) ? key : fallback);
+  addChartCard("param-plot", "Calibrated parameters (±1σ)", term("calibration", "estimate"));
+  addChartCard("shadow-tc4-plot", "TC4 error: estimate vs shadow", term("shadow", "tc4"));
+  addChartCard("shadow-delta-plot", "Shadow − estimate", term("shadow", "estimate"));
+  const sub = document.createElement("span");
+  Object.assign(sub, { id: "shadow-delta-sub", className: "muted" });
+  $("card-shadow-delta-plot").querySelector(".card-title").append(sub);
+  for (const id of ["param-plot", "shadow-tc4-plot", "shadow-delta-plot"]) $(`card-${id}`).hidden = true;
+  registerFigure("param-plot", parameterFigure);
+  registerFigure("shadow-tc4-plot", tc4Figure);
+  registerFigure("shadow-delta-plot", deltaFigure);
+}
