@@ -66,6 +66,54 @@ def test_glr_without_a_fault_finds_nothing() -> None:
     assert np.allclose(banks.table().llr, 0.0, atol=1e-12)
 
 
+def _run_calibrating(size: float, j0: int, *, augmented: bool, n: int = 80) -> float:
+    """As :func:`_run` for a lamp-group fault, with a filter that also estimates a lamp efficiency p (a
+    random walk in the state [x; p]: x+ = A x + G u (1 + p), so Phi_x = [[A, G u_j], [0, 1]], linear and
+    time-varying, the structure of the joint EKF, eq. 16).  The filter's p takes up part of the lost
+    power; the signatures follow it in [x; p] (``augmented``) or in x alone.  Returns the fitted size."""
+    banks = SignatureBanks(4 if augmented else 3, 2, KINDS, COLS, onset_every=j0, window=10 * n, t_s=0.1)
+    x = np.array([300.0, 310.0, 305.0])
+    xh, P = np.zeros(4), np.diag([4.0, 4.0, 4.0, 0.01])
+    xh[:3] = x
+    Q, R = np.diag([0.5, 0.5, 0.5, 1e-3]), np.eye(2)
+    Cx = np.concatenate([C, np.zeros((2, 1))], axis=1)
+    for j in range(n):
+        u = np.array([1.0 + 0.5 * np.sin(0.2 * j), 2.0])
+        y = C @ x
+        S = Cx @ P @ Cx.T + R
+        L = P @ Cx.T @ np.linalg.inv(S)
+        nu = y - Cx @ xh
+        if augmented:
+            banks.update(j, Cx, nu, S, L, np.array([True, True]))
+        else:  # the signatures of the filter's theta part only (the bug this test guards)
+            banks.update(j, C, nu, S, L[:3], np.array([True, True]))
+        xh = xh + L @ nu
+        P = (np.eye(4) - L @ Cx) @ P
+        Phi = np.eye(4)
+        Phi[:3, :3], Phi[:3, 3] = A, G @ u
+        if augmented:
+            banks.predict(Phi, np.concatenate([G, np.zeros((1, 2))]), u)
+        else:
+            banks.predict(A, G, u)
+        delivered = u.copy()
+        if j >= j0:
+            delivered[0] *= 1.0 - size
+        x = A @ x + G @ delivered
+        xh = Phi @ xh + np.concatenate([G @ u, [0.0]])  # A x + G u (1 + p)
+        P = Phi @ P @ Phi.T + Q
+    tab = banks.table()
+    k = int(np.flatnonzero(tab.onsets == j0)[0])
+    if augmented:
+        assert int(np.argmax(tab.llr[k])) == 4  # lamp group 0 is the most likely
+    return float(tab.size[k, 4])
+
+
+def test_glr_with_a_calibrating_filter_needs_the_parameters_in_the_signatures() -> None:
+    """A failed group taken for 82 % lost (derate) by a calibrating twin was this bug (docs/faults.md)."""
+    assert _run_calibrating(0.6, j0=20, augmented=True) == pytest.approx(0.6, rel=1e-9)
+    assert abs(_run_calibrating(0.6, j0=20, augmented=False) - 0.6) > 0.03  # the filter's p took part of it
+
+
 @pytest.fixture(scope="module")
 def detector_factory(small_radiation):
     from twin.config import small_config

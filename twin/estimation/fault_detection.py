@@ -16,6 +16,13 @@ controller commanded -- never the furnace's injected faults.  Per sample:
    ``min_power_loss``) and it beats the runner-up of the same onset by ``llr_margin``.
 3. :meth:`FaultDetector.predict` (after the EKF's prediction) moves the signatures on.
 
+With a calibrating estimator (:class:`twin.estimation.joint.JointEstimator`, state x = [theta; p])
+the signatures live in the same augmented state: the filter's gain moves p too (a lost lamp group
+first looks like a lower lamp efficiency, which the calibration takes up while the reference holds),
+and p acts back on theta through dF/dp (Phi_x of eq. 16).  A signature over theta alone misses that
+part of the filter's reaction and underestimates the fault (a failed group of the small furnace was
+taken as 82 % lost, so derated, instead of 100 %).
+
 What follows a decision (the ride-through, :class:`twin.runs.loop.ClosedLoop`): a faulty TC is left
 out of the estimate until it reads consistently again for ``readmit_s``; a lamp group's believed
 gain ``lamp_gains`` drops by the estimated loss (to 0 below ``failed_below``: failed), the
@@ -111,16 +118,19 @@ class FaultDetector:
     model : the twin's nominal discrete model (``fe``, ``jac_theta``, ``jac_u``): the signatures' Phi, Gamma
     settings : thresholds (defaults: :class:`DetectionSettings`)
     jacobian_every_s : Phi of the signatures is re-evaluated at the estimate this often
+    n_parameters : calibrated parameters k in the estimator's state [theta; p] (module docstring)
     """
 
     def __init__(self, cfg: FurnaceConfig, model: Any, settings: DetectionSettings | None = None, *,
-                 jacobian_every_s: float = 1.0) -> None:
+                 jacobian_every_s: float = 1.0, n_parameters: int = 0) -> None:
         self.cfg = cfg
         self.settings = s = settings or DetectionSettings()
         self.t_s = t_s = float(cfg.sampling.t_s)
         self.groups = tuple(g.name for g in cfg.lamps.groups)
         self.model = model
         self.C = np.asarray(model.fe.C(np.asarray(cfg.tc_positions()[:N_EKF_TCS])), float)
+        self.k = k = int(n_parameters)
+        self._C_x = np.concatenate([self.C, np.zeros((N_EKF_TCS, k))], axis=1)  # C_x = [C, 0] (12b)
         m = len(self.groups)
         # the hypotheses: offset, drift of TC1..3; loss of each group's power; and two the model's own errors
         # look like, never declared: a loss of all groups' power, a heat capacity error (glr module docstring)
@@ -128,7 +138,7 @@ class FaultDetector:
         cols = tuple(range(N_EKF_TCS)) * 2 + tuple(range(m)) + (0,) * len(NUISANCES)
         self.kinds, self.columns = kinds, cols
         self.targets = TC_NAMES[:N_EKF_TCS] * 2 + self.groups + ("all groups", "heat capacity")
-        self.banks = SignatureBanks(model.n, N_EKF_TCS, kinds, cols, onset_every=self._n(s.onset_every_s),
+        self.banks = SignatureBanks(model.n + k, N_EKF_TCS, kinds, cols, onset_every=self._n(s.onset_every_s),
                                     window=self._n(s.window_s), t_s=t_s)
         self.lamp_gains = np.ones(m)  # believed fraction of each group's nominal power delivered
         self._rated = np.asarray(cfg.group_matrix, float).sum(axis=0) * cfg.lamps.rated_power  # W per group
@@ -237,8 +247,8 @@ class FaultDetector:
             if self.innovation_tests:
                 tested = ~self.excluded & np.isfinite(nu)
                 root = np.sqrt(self.inflation)  # coloured innovations count as noisier (_track_inflation)
-                self.banks.update(self._j, self.C, nu, S * np.outer(root, root), np.asarray(info.gain, float)[:n],
-                                  tested)
+                gain = np.asarray(info.gain, float)[:n + self.k]  # the parameters' rows too
+                self.banks.update(self._j, self._C_x, nu, S * np.outer(root, root), gain, tested)
                 self._decide(t)
         out, self._pending = self._pending, []
         return out
@@ -380,12 +390,22 @@ class FaultDetector:
         self._declare(Detection(t, onset, target, what, kept, text))
 
     # ------------------------------------------------------------------ 3. prediction
-    def predict(self, u: Array, theta: Array, theta_next: Array) -> None:
+    def predict(self, u: Array, theta: Array, theta_next: Array, parameter_jacobian: Array | None = None) -> None:
         """After the EKF's prediction with the commanded powers u (m,): theta the updated estimate,
-        theta_next the prediction."""
-        n = self.model.n
+        theta_next the prediction; ``parameter_jacobian`` dF/dp (n, k) of that prediction (a calibrating
+        estimator; zeros when not given)."""
+        n, k = self.model.n, self.k
         self._u = np.asarray(u, float).copy()
         th = np.asarray(theta, float)[:n]
         if self._Phi is None or self._j % self._jac_every == 0:
             self._Phi = np.asarray(self.model.jac_theta(th, u), float)
-        self.banks.predict(self._Phi, self._Gamma, u, np.asarray(theta_next, float)[:n] - th)
+        increment = np.asarray(theta_next, float)[:n] - th
+        if not k:
+            self.banks.predict(self._Phi, self._Gamma, u, increment)
+            return
+        Phi_x = np.eye(n + k)  # [[dF/dtheta, dF/dp], [0, I]] (16); p is a random walk
+        Phi_x[:n, :n] = self._Phi
+        if parameter_jacobian is not None:
+            Phi_x[:n, n:] = parameter_jacobian
+        Gamma_x = np.concatenate([self._Gamma, np.zeros((k, self._Gamma.shape[1]))])
+        self.banks.predict(Phi_x, Gamma_x, u, np.concatenate([increment, np.zeros(k)]))

@@ -169,7 +169,7 @@ class ClosedLoop(FaultRideThrough):
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
-        self.detector = FaultDetector(cfg, self._ctl.nominal)
+        self.detector = FaultDetector(cfg, self._ctl.nominal, n_parameters=self.estimator.k)
         self._motion_for_detection(0.0)
 
         # --- output grid: FD cell centres; the record of the run ---
@@ -397,7 +397,7 @@ class ClosedLoop(FaultRideThrough):
             c0 = time.perf_counter()
             # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed)
             self.estimators.predict(self._lamp_gains * snap.u, eta)
-            self.detector.predict(snap.u, theta, self.estimator.state.theta)
+            self.detector.predict(snap.u, theta, self.estimator.state.theta, self.estimator.parameter_jacobian)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap
