@@ -75,13 +75,15 @@ def create_app(
     *,
     loop_factory: LoopFactory | None = None,
     viser: bool = False,
+    rerun: bool = False,
     furnace_name: str | None = None,
     study_runner: StudyRunner | None = None,
 ) -> FastAPI:
-    """Build the app; the lifespan opens the database, marks crashed runs interrupted, and
-    (with ``viser=True``) starts the 3D view on ``settings.viser_port``.  ``furnace_name`` labels
-    the furnace (``--config``); by default a shipped furnace's name or ``custom``.  ``study_runner``
-    replaces ``twin.studies.engine.run_study`` (tests of the studies API's plumbing)."""
+    """Build the app; the lifespan opens the database, marks crashed runs interrupted, starts the radiation
+    models' warm-up, (with ``viser=True``) the 3D view on ``settings.viser_port`` and (with ``rerun=True``)
+    the rerun web viewer on ``settings.rerun_web_port``.  ``furnace_name`` labels the furnace (``--config``);
+    by default a shipped furnace's name or ``custom``.  ``study_runner`` replaces
+    ``twin.studies.engine.run_study`` (tests of the studies API's plumbing)."""
     settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
     cfg = cfg or load_config()
     limits = scenario_limits(cfg, furnace_name)
@@ -94,6 +96,9 @@ def create_app(
         manager = RunManager(settings, cfg, repo, loop_factory, limits=limits,
                              event_loop=asyncio.get_running_loop())
         await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
+        warm_up = getattr(manager.loop_factory, "start_warm_up", None)
+        if callable(warm_up):  # the radiation model loads in the background; the server answers meanwhile
+            warm_up(cfg)
         app.state.manager = manager
         app.state.studies = StudyManager(settings, cfg, study_runner, furnace_name=limits.furnace)
         app.state.viser_url = None
@@ -108,6 +113,21 @@ def create_app(
             scene.start()
             app.state.viser_url = scene.url
         app.state.viser = scene
+        app.state.rerun_url = None
+        viewer = None
+        if rerun and settings.rerun_web_port:
+            from backend.rerun_viewer import RerunWebViewer
+
+            viewer = RerunWebViewer(settings.rerun_web_port, settings.rerun_grpc_port,
+                                    server_memory_limit=settings.rerun_server_memory_limit,
+                                    memory_limit=settings.rerun_memory_limit, log_dir=settings.data_dir)
+            if await asyncio.to_thread(viewer.start):
+                app.state.rerun_url = viewer.url
+                if manager.live_url is None:
+                    manager.live_url = viewer.proxy_url
+            else:
+                viewer = None
+        app.state.rerun_viewer = viewer
         try:
             yield
         finally:
@@ -115,6 +135,8 @@ def create_app(
             await asyncio.to_thread(app.state.studies.shutdown)
             if scene is not None:
                 scene.stop()
+            if viewer is not None:
+                viewer.stop()
             repo.close()
 
     app = FastAPI(

@@ -16,11 +16,13 @@ from backend.settings import Settings
 from backend.study_manager import StudyManager
 from twin.limits import ScenarioLimits
 from twin.scenario import (
+    FaultSpec,
     OscillationSpec,
     PointsReference,
     Reference,
     Scenario,
     TransitionReference,
+    parse_faults,
     parse_oscillation,
     parse_reference,
     parse_scenario,
@@ -106,6 +108,16 @@ def oscillation_body(
     return _validated(parse_oscillation, body, manager.limits)
 
 
+def faults_body(
+    manager: ManagerDep,
+    body: Annotated[list[FaultSpec], SkipValidation, Body(title="Faults",
+                                                          description="replaces the run's injected faults; "
+                                                                      "'at' counts from now; [] clears them")],
+) -> list[FaultSpec]:
+    return _validated(parse_faults, body, manager.limits)
+
+
 ScenarioBody = Annotated[Scenario, Depends(scenario_body)]
+FaultsBody = Annotated[list[FaultSpec], Depends(faults_body)]
 ReferenceBody = Annotated[TransitionReference | PointsReference, Depends(reference_body)]
 OscillationBody = Annotated[OscillationSpec, Depends(oscillation_body)]

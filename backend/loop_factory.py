@@ -1,12 +1,21 @@
 """The loop factory of the server: real ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (the
 twin's and the simulated furnace's own, each loaded once per furnace), on the scenario's furnace (simulated,
-or over OPC UA with the server's ``opcua`` settings)."""
+or over OPC UA with the server's ``opcua`` settings).
+
+The radiation models (exchange factors, ray-traced once per furnace and cached on disk) are loaded in a
+background thread as soon as the server starts (:meth:`DefaultLoopFactory.start_warm_up`): the twin's, then
+the simulated furnace's own (runs' default truth); until they are ready the server answers everything at
+once, ``GET /api/health`` reports ``"radiation": "computing"`` with the progress, and new runs wait in the
+status ``queued`` (backend.run_manager).
+"""
 
 from __future__ import annotations
 
 import logging
 import threading
-from typing import Any
+import time
+from dataclasses import dataclass, replace
+from typing import Any, Literal
 
 from backend.run_worker import LoopLike
 from backend.settings import Settings
@@ -16,29 +25,134 @@ from twin.scenario import OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 
+RadiationState = Literal["computing", "ready", "failed"]
+
+
+@dataclass(frozen=True)
+class WarmUpStatus:
+    """Where the radiation model of one furnace stands."""
+
+    state: RadiationState
+    stage: str  # "waiting", "loading the cache", "ray tracing", "building the model", "ready", "failed"
+    done: int = 0  # positions ray-traced (of ``total``); total once loaded from the cache
+    total: int = 0
+    started: float = 0.0  # time.monotonic() at the start
+    finished: float | None = None
+    error: str | None = None
+
+    @property
+    def fraction(self) -> float:
+        if self.state == "ready":
+            return 1.0
+        return self.done / self.total if self.total else 0.0
+
+    @property
+    def elapsed_s(self) -> float:
+        return (self.finished if self.finished is not None else time.monotonic()) - self.started
+
+
+#: CPU priority of a run at speed max (os.nice): the server and the runs paced in real time come first
+MAX_SPEED_NICENESS = 5
+
 
 class DefaultLoopFactory:
-    """Builds ``twin.runs.loop.ClosedLoop`` runs sharing the radiation models (loaded once, lazily), on the
-    scenario's furnace (:func:`twin.furnace.connect.open_furnace`; one over OPC UA with ``settings.opcua``)."""
+    """Builds the server's runs: a simulated furnace's ``twin.runs.loop.ClosedLoop`` in its own process
+    (:class:`backend.process_loop.ProcessLoop`, which reads the radiation models from the disk cache), or in
+    the server's process with ``processes=False`` (sharing the radiation models loaded here); a run on a
+    furnace over OPC UA (:func:`twin.furnace.connect.open_furnace`, ``settings.opcua``; real time, paced by
+    the furnace) always in the server's process."""
 
-    def __init__(self, settings: Settings | None = None) -> None:
+    def __init__(self, settings: Settings | None = None, *, processes: bool = True) -> None:
         self.settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
+        self.processes = processes
         self._lock = threading.Lock()
         self._radiation: dict[str, Any] = {}
         self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
         self._models: dict[tuple[str, str], tuple[Any, tuple[float, float]]] = {}  # (model, hold range)
+        self._status: dict[str, WarmUpStatus] = {}
+        self._ready: dict[str, threading.Event] = {}
+        self._status_lock = threading.Lock()
 
-    def _shared(self, store: dict[str, Any], cfg: FurnaceConfig, load: Any, budget: PlanBudget | None) -> Any:
-        """``store[cfg]``, loaded (or ray-traced) once by ``load(cfg)``; a run waiting for another caller's
-        computation stops waiting when its ``budget`` is cancelled (Stop while starting)."""
+    # ---- warm-up ----
+    def _event(self, key: str) -> threading.Event:
+        with self._status_lock:
+            return self._ready.setdefault(key, threading.Event())
+
+    def _set(self, key: str, **changes: Any) -> None:
+        with self._status_lock:
+            self._status[key] = replace(self._status[key], **changes)
+
+    def start_warm_up(self, cfg: FurnaceConfig) -> None:
+        """Load (or ray-trace) the radiation model of ``cfg`` in a daemon thread; idempotent."""
+        key = cfg.digest()
+        with self._status_lock:
+            if key in self._status:
+                return
+            self._status[key] = WarmUpStatus("computing", "waiting", started=time.monotonic())
+        threading.Thread(target=self._warm_up, args=(cfg,), name="radiation-warm-up", daemon=True).start()
+
+    def _warm_up(self, cfg: FurnaceConfig) -> None:
+        key = cfg.digest()
+        try:
+            self.radiation(cfg)
+            self._set(key, stage="building the model")
+            self.reachable_range(cfg)
+            self.truth_radiation(cfg)
+            self._set(key, state="ready", stage="ready", finished=time.monotonic())
+            log.info("radiation model ready (%.1f s)", self._status[key].elapsed_s)
+        except Exception as exc:
+            log.exception("loading the radiation model failed; runs will retry")
+            self._set(key, state="failed", stage="failed", error=f"{type(exc).__name__}: {exc}",
+                      finished=time.monotonic())
+        finally:
+            self._event(key).set()
+
+    def warm_up_status(self, cfg: FurnaceConfig) -> WarmUpStatus:
+        """The radiation model's state: ``ready`` once loaded (also when it was loaded without a warm-up)."""
+        key = cfg.digest()
+        with self._status_lock:
+            st = self._status.get(key)
+        if st is None:
+            return WarmUpStatus("ready" if key in self._radiation else "computing",
+                                "ready" if key in self._radiation else "waiting")
+        return st
+
+    def ready(self, cfg: FurnaceConfig) -> bool:
+        """True when a run can be built without waiting for the radiation model."""
+        return cfg.digest() in self._radiation and self.warm_up_status(cfg).state != "computing"
+
+    def wait_ready(self, cfg: FurnaceConfig, timeout: float) -> bool:
+        """Block until the warm-up of ``cfg`` ended (ready or failed) or ``timeout`` s passed."""
+        if self.ready(cfg):
+            return True
+        key = cfg.digest()
+        with self._status_lock:
+            started = key in self._status
+        if not started:
+            self.start_warm_up(cfg)
+        return self._event(key).wait(timeout)
+
+    # ---- the models ----
+    def _shared(self, store: dict[str, Any], cfg: FurnaceConfig, load: Any, budget: PlanBudget | None,
+                what: str = "") -> Any:
+        """``store[cfg]``, loaded (or ray-traced) once by ``load(cfg, on_position=...)``; a run waiting for
+        another caller's computation stops waiting when its ``budget`` is cancelled (Stop while starting).
+        During a warm-up the stages say ``what`` is loaded or traced, with the traced positions."""
         key = cfg.digest()
         while not self._lock.acquire(timeout=0.1):
             if budget is not None and budget.cancelled:
                 raise PlanCancelled("stopped while the radiation model was being computed")
         try:
             if key not in store:
-                store[key] = load(cfg)
+                if key in self._status:
+                    self._set(key, stage=f"loading the cache{what}", done=0, total=0)
+
+                def traced(done: int, total: int) -> None:
+                    if key in self._status:
+                        self._set(key, stage=f"ray tracing{what}", done=done, total=total)
+
+                store[key] = load(cfg, on_position=traced)
             return store[key]
         finally:
             self._lock.release()
@@ -53,7 +167,7 @@ class DefaultLoopFactory:
         """The simulated furnace's own table (``[truth.radiation]``), for runs whose truth is independent."""
         from twin.furnace.simulated.truth import truth_radiation
 
-        return self._shared(self._truth_radiation, cfg, truth_radiation, budget)
+        return self._shared(self._truth_radiation, cfg, truth_radiation, budget, " (the simulated furnace's own)")
 
     def reachable_range(self, cfg: FurnaceConfig) -> tuple[float, float] | None:
         """Fillet means the furnace can hold (``twin.control.reference.reachable_range``), cached per furnace;
@@ -143,6 +257,12 @@ class DefaultLoopFactory:
         rad = self.radiation(cfg, budget)
         simulated_truth = scenario.plant.kind == "simulated" and scenario.truth == "independent"
         own = self.truth_radiation(cfg, budget) if simulated_truth else None  # a furnace over OPC UA has no truth
+        if self.processes and scenario.plant.kind == "simulated":
+            # the child loads both tables from the disk cache, where they now are
+            from backend.process_loop import ProcessLoop
+
+            return ProcessLoop(cfg, scenario, budget=budget,
+                               niceness=MAX_SPEED_NICENESS if scenario.speed == "max" else 0)
         furnace = open_furnace(cfg, scenario, rad, truth_radiation=own, opcua=self.settings.opcua,
                                data_dir=self.settings.data_dir)
         try:

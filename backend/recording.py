@@ -14,15 +14,24 @@ One :class:`rerun.RecordingStream` per run, saved to its file before anything is
 - with a calibrating estimator ``calibration/<parameter>`` (relative deviation) and
   ``calibration/<parameter>_sigma``; with a shadow estimator ``tc/error_shadow/TC1..4`` (K).
 - ``events``: the run's events (start, live changes, re-plans, saturated groups, feasibility
-  warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time.
+  warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time;
+  ``faults/injected`` and ``faults/detected`` the fault events (the faults the simulated furnace started
+  or cleared, and what the twin's fault detection decided).
 
 Scalars are buffered and sent as columns (``send_columns``) at each :meth:`flush`; the
 default blueprint opens the viewer on fields | temperatures and TCs | powers and eta.
+
+With ``live_url`` (``furnace-twin serve --rerun-connect URL``, or the server's own rerun web viewer)
+a second stream with the same recording id sends the same entities live to that viewer or gRPC
+proxy; the file is written as without it.  The live stream is never flushed from the run's thread
+(rerun's gRPC client sends in the background and would block a flush while the viewer is away);
+an endpoint that does not answer when the run starts is skipped with a warning.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +65,7 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
                 rrb.TimeSeriesView(name="fillet mean vs reference (K)", origin="temperature"),
                 rrb.TimeSeriesView(name="TC readings (K)", origin="tc/reading"),
                 rrb.TimeSeriesView(name="TC reading - estimate (K)", origin="tc/error"),
+                rrb.TextLogView(name="faults and events", origin="/", contents=["faults/**", "events"]),
             ),
             rrb.Vertical(
                 rrb.TimeSeriesView(name="group powers u (fraction of u_max)", origin="power/u"),
@@ -87,6 +97,7 @@ class RecordingSink:
         tc_positions: list[tuple[float, float]],
         image_interval: float = 0.5,
         temperature_range: tuple[float, float] = (300.0, 1300.0),
+        live_url: str | None = None,
     ) -> None:
         self.cfg = cfg
         self.path = path
@@ -95,6 +106,18 @@ class RecordingSink:
         self.groups = tuple(g.name for g in cfg.lamps.groups)
         self.rec = rr.RecordingStream(APP_ID, recording_id=run_id)
         self.rec.save(str(path), default_blueprint=blueprint(self.groups))
+        self.live: rr.RecordingStream | None = None
+        if live_url:
+            from backend.rerun_viewer import reachable
+
+            if reachable(live_url):
+                self.live = rr.RecordingStream(APP_ID, recording_id=run_id)
+                self.live.connect_grpc(live_url, default_blueprint=blueprint(self.groups))
+                log.info("run %s streams live to %s", run_id, live_url)
+            else:
+                log.warning("run %s: no rerun viewer or proxy answers at %s; the recording goes to the file only",
+                            run_id, live_url)
+        self._streams = [self.rec] if self.live is None else [self.rec, self.live]
         self._rows: list[dict[str, Any]] = []
         self._next_image_t = -np.inf
         self._closed = False
@@ -106,12 +129,20 @@ class RecordingSink:
         s = self.cfg.specimen
         return (x / s.length * s.nx, y / s.width * s.ny)
 
+    def _log(self, entity: str, value: Any, *, static: bool = False) -> None:
+        for rec in self._streams:
+            rec.log(entity, value, static=static)
+
+    def _set_time(self, t: float) -> None:
+        for rec in self._streams:
+            rec.set_time(TIMELINE, duration=t)
+
     def _log_static(self, tc_positions: list[tuple[float, float]]) -> None:
         x0, x1, y0, y1 = self.cfg.fillet
         corners = [self._cell(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0))]
-        self.rec.log("field/fillet", rr.LineStrips2D([corners], colors=[255, 255, 255], radii=0.08),
+        self._log("field/fillet", rr.LineStrips2D([corners], colors=[255, 255, 255], radii=0.08),
                      static=True)
-        self.rec.log(
+        self._log(
             "field/tc",
             rr.Points2D([self._cell(x, y) for x, y in tc_positions], labels=list(TC_NAMES),
                         colors=[[255, 255, 255]] * 3 + [[255, 80, 200]], radii=0.35),
@@ -121,23 +152,23 @@ class RecordingSink:
                    [140, 86, 75]]
         for kind in ("u", "u_ff"):
             for j, g in enumerate(self.groups):
-                self.rec.log(f"power/{kind}/{g}", rr.SeriesLines(names=[f"{kind} {g}"],
+                self._log(f"power/{kind}/{g}", rr.SeriesLines(names=[f"{kind} {g}"],
                              colors=[palette[j % len(palette)]]), static=True)
         for i, name in enumerate(TC_NAMES):
             for kind in ("reading", "error"):
-                self.rec.log(f"tc/{kind}/{name}", rr.SeriesLines(names=[name],
+                self._log(f"tc/{kind}/{name}", rr.SeriesLines(names=[name],
                              colors=[palette[i]]), static=True)
         for name, color in (("T_ref", [0, 0, 0]), ("T_mean_hat", [214, 39, 40])):
-            self.rec.log(f"temperature/{name}", rr.SeriesLines(names=[name], colors=[color]), static=True)
-        self.rec.log("eta", rr.SeriesLines(names=["eta"]), static=True)
-        self.rec.log("inhomogeneity/estimated", rr.SeriesLines(names=["estimated"]), static=True)
+            self._log(f"temperature/{name}", rr.SeriesLines(names=[name], colors=[color]), static=True)
+        self._log("eta", rr.SeriesLines(names=["eta"]), static=True)
+        self._log("inhomogeneity/estimated", rr.SeriesLines(names=["estimated"]), static=True)
 
     def _declare_truth(self) -> None:
         """The true series, declared with the first sample that has them (a real furnace never does)."""
         self._truth = True
-        self.rec.log("temperature/true_mean", rr.SeriesLines(names=["true_mean"], colors=[[31, 119, 180]]),
+        self._log("temperature/true_mean", rr.SeriesLines(names=["true_mean"], colors=[[31, 119, 180]]),
                      static=True)
-        self.rec.log("inhomogeneity/true", rr.SeriesLines(names=["true"]), static=True)
+        self._log("inhomogeneity/true", rr.SeriesLines(names=["true"]), static=True)
 
     def add(self, s: SnapshotLike) -> None:
         """Buffer the scalars of one sample; log the field images every ``image_interval`` s."""
@@ -157,20 +188,26 @@ class RecordingSink:
         })
         if s.t >= self._next_image_t:
             self._next_image_t = float(s.t) + self.image_interval
-            self.rec.set_time(TIMELINE, duration=float(s.t))
+            self._set_time(float(s.t))
             for name, field in (("estimated", s.field_hat), ("true", s.field_true)):
                 if field is None:  # a furnace without a true field
                     continue
-                self.rec.log(f"field/{name}", rr.DepthImage(
+                self._log(f"field/{name}", rr.DepthImage(
                     np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
                     depth_range=list(self.temperature_range)))
 
     def log_event(self, t: float, text: str, level: str = "info") -> None:
-        """One event of the run as a text log at run time ``t`` (s); ``level`` info, warn or error."""
+        """One event of the run as a text log at run time ``t`` (s); ``level`` info, warn or error.  A fault
+        event goes to ``faults/injected`` or ``faults/detected``."""
         if self._closed:
             return
-        self.rec.set_time(TIMELINE, duration=float(t))
-        self.rec.log("events", rr.TextLog(text, level=_LEVELS.get(level, rr.TextLogLevel.INFO)))
+        entity = "events"
+        if text.startswith(("fault injected", "faults cleared")):
+            entity = "faults/injected"
+        elif text.startswith("fault detected"):
+            entity = "faults/detected"
+        self._set_time(float(t))
+        self._log(entity, rr.TextLog(text, level=_LEVELS.get(level, rr.TextLogLevel.INFO)))
 
     def flush(self) -> None:
         """Send the buffered scalars as columns and push them to the file."""
@@ -180,7 +217,8 @@ class RecordingSink:
         times = rr.TimeColumn(TIMELINE, duration=np.array([r["t"] for r in rows]))
 
         def send(entity: str, values: np.ndarray) -> None:
-            self.rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
+            for rec in self._streams:
+                rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
 
         series = [("T_ref", "temperature/T_ref"), ("T_mean_hat", "temperature/T_mean_hat"), ("eta", "eta"),
                   ("inh", "inhomogeneity/estimated")]
@@ -217,3 +255,6 @@ class RecordingSink:
         self._closed = True
         self.rec.flush()
         self.rec.disconnect()
+        live, self.live = self.live, None
+        if live is not None:  # may wait for an unreachable viewer: not on the run's thread
+            threading.Thread(target=live.disconnect, name="rerun-live-close", daemon=True).start()

@@ -18,7 +18,7 @@ from backend.settings import Settings
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.limits import ScenarioLimits
-from twin.scenario import OscillationSpec, Reference, Scenario, check
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, check, parse_faults
 
 
 def refusal(notes: tuple[str, ...]) -> str:
@@ -74,10 +74,14 @@ class RunChecks:
             except (ValueError, OSError) as exc:
                 raise LimitExceeded(f"plant.endpoint: {exc}") from None
 
-    def change_limits(self, value: Reference | OscillationSpec) -> None:
-        """Raise :class:`ChangeRejected` if a live change lies outside the furnace's limits."""
+    def change_limits(self, value: Reference | OscillationSpec | list[FaultSpec]) -> None:
+        """Raise :class:`ChangeRejected` if a live change lies outside the furnace's limits (a fault list: its
+        targets among this furnace's TCs and lamp groups, its sizes within range)."""
         try:
-            check(value, self.limits)
+            if isinstance(value, list):
+                parse_faults([f.model_dump(mode="json") for f in value], self.limits)
+            else:
+                check(value, self.limits)
         except ValidationError as exc:
             raise ChangeRejected(say(exc)) from None
 
@@ -107,7 +111,8 @@ class RunChecks:
                 raise LimitExceeded(f"reference: {exc}") from None
 
     async def start(self, scenario: Scenario) -> tuple[str, ...]:
-        """Everything a new run must pass; returns its feasibility warnings (:class:`LimitExceeded` if refused)."""
+        """Everything a new run must pass; returns its feasibility warnings (:class:`LimitExceeded` if refused).
+        All but :meth:`limits_of` need the radiation model (the run manager defers them during its warm-up)."""
         await self._limits_and_range(scenario)
         report = await self.assess(scenario.reference, scenario.duration, scenario.oscillation)
         notes: tuple[str, ...] = () if report is None else tuple(report.messages)
@@ -117,7 +122,20 @@ class RunChecks:
 
     async def preview(self, scenario: Scenario) -> dict[str, Any]:
         """What :meth:`start` would say, as JSON (``POST /api/feasibility``): ``verdict`` ok / warn / refuse,
-        ``messages``, and the feasibility details (``best`` reachable mean, ``hold_range``)."""
+        ``messages``, and the feasibility details (``best`` reachable mean, ``hold_range``).  While the radiation
+        model warms up only the limits are checked: ``pending`` says so (the run would wait as ``queued``)."""
+        ready = getattr(self.loop_factory, "ready", None)
+        if callable(ready) and not ready(self.cfg):
+            try:
+                self.limits_of(scenario)
+            except LimitExceeded as exc:
+                refused = [str(exc)]
+            else:
+                refused = []
+            return {"verdict": "refuse" if refused else "pending",
+                    "messages": refused or ["the radiation model is still loading: the reference is checked when "
+                                            "it is ready (a run started now waits as queued)"],
+                    "worst": None, "first_t": None, "best": None, "hold_range": None}
         problem = None
         try:
             await self._limits_and_range(scenario)

@@ -1,4 +1,5 @@
-"""A run's folder: ``scenario.json``, ``timeseries.npz``, ``metrics.json``, ``recording.rrd``.
+"""A run's folder: ``scenario.json``, ``timeseries.npz``, ``metrics.json``, ``recording.rrd``, ``faults.json``
+(the faults injected into the run and what the twin detected, as ``[{"t", "text"}]``).
 
 Files are replaced atomically (write to a temporary name, then ``os.replace``), so a
 reader or a crash never sees half a file: after a crash the folder holds the last
@@ -22,6 +23,7 @@ RECORDING = "recording.rrd"
 TIMESERIES = "timeseries.npz"
 METRICS = "metrics.json"
 SCENARIO = "scenario.json"
+FAULTS = "faults.json"
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,10 @@ class RunFiles:
     @property
     def scenario(self) -> Path:
         return self.folder / SCENARIO
+
+    @property
+    def faults(self) -> Path:
+        return self.folder / FAULTS
 
     def remove(self) -> None:
         """Delete the folder: first out of sight (renamed to ``.deleted-<id>``, atomic), then its files."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import dataclasses
+import json
 import logging
 import time
 import uuid
@@ -54,12 +55,16 @@ from twin.config import FurnaceConfig
 from twin.control.budget import PlanCancelled
 from twin.furnace.interface import FurnaceLost
 from twin.limits import ScenarioLimits, scenario_limits
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 ADVANCE_BUDGET_S = 0.05  # wall s of stepping per executor call: bounds frame latency at speed max
+
+
+class _StoppedWhileQueued(Exception):
+    """A run stopped before its model was ready (it ends ``stopped`` with no data)."""
 
 
 @dataclass(eq=False)
@@ -73,6 +78,7 @@ class ActiveRun:
     published_seq: int = -1
     sent_events: int = 0  # events of the worker's list already sent in frames
     started_monotonic: float = field(default_factory=time.monotonic)
+    checked: bool = False  # reference and first plan checked at POST (the model was ready then)
 
 
 class RunManager:
@@ -98,6 +104,8 @@ class RunManager:
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
         self._shutting_down = False
+        #: where runs stream their recording live (``--rerun-connect``, or the server's rerun web viewer)
+        self.live_url: str | None = settings.rerun_connect
         self._requests: StartRequests[Started] = StartRequests()  # a repeated POST gets the same run
         self.checks = RunChecks(cfg, self.limits, settings, self.loop_factory)
         #: the data directory's usage, quota, free space and retention (backend.storage)
@@ -107,6 +115,17 @@ class RunManager:
         return RunFiles(self.settings.runs_dir / run_id)
 
     # ---- start ----
+    def model_ready(self) -> bool:
+        """The loop factory can build a run now (its radiation models are loaded); a factory without a
+        warm-up is always ready."""
+        ready = getattr(self.loop_factory, "ready", None)
+        return True if not callable(ready) else bool(ready(self.cfg))
+
+    def warm_up(self) -> Any:
+        """The radiation model's :class:`backend.loop_factory.WarmUpStatus`; ``None`` for a factory without one."""
+        status = getattr(self.loop_factory, "warm_up_status", None)
+        return status(self.cfg) if callable(status) else None
+
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id (:meth:`launch` without a request id)."""
         return (await self.launch(scenario)).run_id
@@ -124,7 +143,16 @@ class RunManager:
         return dataclasses.replace(started, replayed=replayed)
 
     async def _launch(self, scenario: Scenario) -> Started:
-        notes = await self.checks.start(scenario)
+        """Register and launch a run at once.  While the radiation models warm up the run waits as ``queued``:
+        only the limits (and the furnace it names) are checked now, its reference (reachable, feasible, a plan
+        within this server's time and memory) when the models are ready, and a refusal then ends it in
+        ``error``; afterwards all of it is a :class:`LimitExceeded` here."""
+        checked = self.model_ready()
+        if checked:
+            notes = await self.checks.start(scenario)
+        else:
+            self.checks.limits_of(scenario)
+            notes = ()
         self._check_plant_free(scenario)
         await self.checks.plant(scenario)
         running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
@@ -144,12 +172,13 @@ class RunManager:
         write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
-                           disk=self.disk, notes=notes)
+                           disk=self.disk, notes=notes, live_url=self.live_url)
         run = ActiveRun(
             worker=worker,
             hub=StreamHub(queue_frames=self.settings.client_queue_frames),
             executor=concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"run-{run_id}"),
             wake=asyncio.Event(),
+            checked=checked,
         )
         self._runs[run_id] = run
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
@@ -199,6 +228,10 @@ class RunManager:
         final = "finished"
         error: str | None = None
         try:
+            if not await self._wait_for_model(run):
+                raise _StoppedWhileQueued
+            if not run.checked:  # posted during the warm-up: checked now that the models are ready
+                w.notes = await self.checks.start(w.scenario)
             self._set_status(run_id, run, "starting")
             await aio.run_in_executor(run.executor, w.build)
             self._set_status(run_id, run, "running")
@@ -231,6 +264,11 @@ class RunManager:
                         pass
                 else:
                     await asyncio.sleep(0)  # let the websockets send
+        except _StoppedWhileQueued:
+            final = "interrupted" if self._shutting_down else "stopped"
+            error = "the server shut down before the run started" if self._shutting_down else None
+        except LimitExceeded as exc:  # the reference, checked once the model was ready
+            final, error = "error", str(exc)
         except asyncio.CancelledError:
             final = "interrupted"
             error = "the server shut down during the run"
@@ -264,6 +302,22 @@ class RunManager:
             self._runs.pop(run_id, None)
             log.info("run %s %s", run_id, final)
 
+    async def _wait_for_model(self, run: ActiveRun) -> bool:
+        """Wait (as ``queued``) until the radiation model is ready; False if the run was stopped meanwhile."""
+        if self.model_ready():
+            return True
+        wait = getattr(self.loop_factory, "wait_ready", None)
+        log.info("run waits for the radiation model")
+        while not run.worker.stop_requested.is_set():
+            if callable(wait):
+                if await asyncio.to_thread(wait, self.cfg, 0.25):
+                    return True
+            elif self.model_ready():
+                return True
+            else:
+                await asyncio.sleep(0.25)
+        return False
+
     # ---- control ----
     def _active(self, run_id: str) -> ActiveRun:
         run = self._runs.get(run_id)
@@ -278,11 +332,13 @@ class RunManager:
         run.worker.stop_requested.set()
         run.wake.set()
 
-    async def change(self, run_id: str, kind: str, value: Reference | OscillationSpec) -> dict[str, Any]:
-        """Queue a reference / oscillation change; wait (bounded) until it is in force (``applied``), a later
-        change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in the
-        run's events and its changes).  A change that cannot be planned raises :class:`ChangeRejected`;
-        one outside the furnace's limits, or a reference the furnace cannot follow, before it reaches the run."""
+    async def change(self, run_id: str, kind: str,
+                     value: Reference | OscillationSpec | list[FaultSpec]) -> dict[str, Any]:
+        """Queue a reference / oscillation / faults change; wait (bounded) until it is in force (``applied``),
+        a later change replaced it (``superseded``), or the wait is over (``pending``: the outcome comes in
+        the run's events and its changes).  A change that cannot be planned (or faults a furnace cannot
+        take) raises :class:`ChangeRejected`; one outside the furnace's limits, or a reference the furnace
+        cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
         if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
@@ -294,7 +350,8 @@ class RunManager:
                 value, w.scenario.duration, w.oscillation,  # type: ignore[arg-type]
                 float(snap.T_mean_hat) if snap is not None else None,
                 float(snap.t) + self.cfg.sampling.t_s if snap is not None else 0.0)
-        body = value.model_dump(mode="json")
+        body = ({"faults": [f.model_dump(mode="json") for f in value]} if isinstance(value, list)
+                else value.model_dump(mode="json"))
         change_id = self._repo.add_change(run_id, kind, body)
         fut = run.worker.submit_change(kind, value, change_id, notes)
         run.wake.set()
@@ -373,8 +430,21 @@ class RunManager:
         run = self._runs.get(run_id)
         if run is not None:
             w = run.worker
-            return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"))
+            return InForce(w.reference.model_dump(mode="json"), w.oscillation.model_dump(mode="json"),
+                           [f.model_dump(mode="json") for f in w.faults])
         return in_force(self.run(run_id).scenario, self.changes(run_id))
+
+    def fault_events(self, run_id: str) -> list[dict[str, Any]]:
+        """The run's fault events (injected, cleared, detected: ``{"t", "text"}``), oldest first."""
+        run = self._runs.get(run_id)
+        if run is not None:
+            return list(run.worker.fault_events)
+        path = self.files(run_id).faults
+        try:
+            events: list[dict[str, Any]] = json.loads(path.read_text())["events"]
+            return events
+        except (OSError, ValueError, KeyError):
+            return []
 
     def live_series(self, run_id: str) -> dict[str, Any] | None:
         """The time series of a run this server drives, up to its latest sample (``timeseries.npz`` layout);

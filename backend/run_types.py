@@ -3,7 +3,7 @@ a started run, a live sample, the reference and oscillation in force."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from backend.frames import SnapshotLike
@@ -64,16 +64,24 @@ class LiveSample:
 
 @dataclass(frozen=True)
 class InForce:
-    """The reference and oscillation a run uses now (after live changes), as JSON objects."""
+    """The reference, oscillation and injected faults a run uses now (after live changes), as JSON."""
 
     reference: dict[str, Any]
     oscillation: dict[str, Any]
+    faults: list[dict[str, Any]] = field(default_factory=list)  # ``at`` in run time
 
 
 def in_force(scenario: dict[str, Any], changes: list[ChangeRow]) -> InForce:
-    """The scenario's reference and oscillation, replaced by each applied change in turn (an ended run)."""
-    current = {"reference": scenario.get("reference") or {}, "oscillation": scenario.get("oscillation") or {}}
+    """The scenario's reference, oscillation and faults, replaced by each applied change in turn (an ended run)."""
+    current: dict[str, Any] = {"reference": scenario.get("reference") or {},
+                               "oscillation": scenario.get("oscillation") or {},
+                               "faults": list(scenario.get("faults") or [])}
     for ch in changes:
-        if ch.status == "applied" and ch.kind in current:
+        if ch.status != "applied":
+            continue
+        if ch.kind == "faults":
+            t = ch.applied_t or 0.0
+            current["faults"] = [{**f, "at": float(f.get("at", 0.0)) + t} for f in ch.body.get("faults", [])]
+        elif ch.kind in current:
             current[ch.kind] = ch.body
     return InForce(**current)

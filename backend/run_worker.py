@@ -7,16 +7,17 @@ each call steps the loop as far as the speed allows (real time x factor, or as f
 possible) for at most a small wall-time budget and returns the latest snapshot.  A loop on a
 real-time furnace (``paced_by_furnace``) is not paced here: its step waits, in this thread, for the
 furnace's next sample, so the furnace's clock drives the run and the server's event loop never waits.
-Reference / oscillation changes are queued and handed to the loop between two samples, in this
-thread, never on the event loop.  A loop that re-plans in the background returns a future per
+Reference / oscillation / fault changes are queued and handed to the loop between two samples, in
+this thread, never on the event loop.  A loop that re-plans in the background returns a future per
 change (``twin.runs.replanning``): the change is ``pending`` until its plan is in force
 (``applied``, with the run time), and ends ``superseded`` (a later change of the same kind won),
-``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run ended first).
-Every plan of the run has a budget (``Settings.plan_max_s``, ``plan_max_mb``) and is cancelled by
-the run's stop event, also while the run is starting.
+``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run ended first); faults apply
+at once.  Every plan of the run has a budget (``Settings.plan_max_s``, ``plan_max_mb``) and is cancelled
+by the run's stop event, also while the run is starting.
 
 The worker keeps the run's events (``backend.run_events``: the loop's and the server's), each added once
-in the worker thread to its list, the loop's run record (``timeseries.npz``) and the recording.
+in the worker thread to its list, the loop's run record (``timeseries.npz``) and the recording.  The run's
+fault events (faults injected, cleared, detected) are kept in ``faults.json`` beside the recording as well.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from twin.physics.fillet import Fillet
 from twin.runs.record import RunEvent, event_arrays, event_level
 from twin.runs.replanning import Superseded
 from twin.runs.series_store import SeriesStore, consolidate
-from twin.scenario import OscillationSpec, Reference, Scenario, describe
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +76,10 @@ class LoopFactory(Protocol):
     def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike: ...
 
 
+#: the events of a run that faults.json keeps (twin.furnace.simulated.faults, twin.runs.loop)
+FAULT_EVENT_PREFIXES = ("fault injected", "faults cleared", "fault detected")
+
+
 class ChangeRejected(ValueError):
     """The loop refused a change, or could not plan it (an unreachable reference, a plan beyond the
     server's time or memory, a failed solve); nothing of it was applied."""
@@ -103,7 +108,7 @@ class Advance:
 
 @dataclass
 class _Change:
-    kind: str  # "reference" | "oscillation"
+    kind: str  # "reference" | "oscillation" | "faults"
     value: Any
     change_id: int
     future: concurrent.futures.Future[dict[str, Any]]
@@ -125,9 +130,11 @@ class RunWorker:
         *,
         disk: DataDir | None = None,
         notes: tuple[str, ...] = (),
+        live_url: str | None = None,
     ) -> None:
         self.run_id = run_id
         self.disk = disk
+        self.live_url = live_url  # a rerun viewer / proxy the recording also streams to
         self.scenario = scenario
         self.cfg = cfg
         self.settings = settings
@@ -139,6 +146,9 @@ class RunWorker:
         self.speed: float | None = None if scenario.speed == "max" else float(scenario.speed)
         self.reference: Reference = scenario.reference
         self.oscillation: OscillationSpec = scenario.oscillation
+        #: the faults injected (``at`` in run time; scenario's, then each applied PUT) and the fault events so far
+        self.faults: list[FaultSpec] = list(scenario.faults)
+        self.fault_events: list[dict[str, Any]] = []
         self.latest: SnapshotLike | None = None
         self.latest_wall = 0.0
         self.seq = 0
@@ -151,7 +161,7 @@ class RunWorker:
         self.series = SeriesStore(files.folder)  # the time series, appended at each flush
         self._events = RunEvents(tuple(g.name for g in cfg.lamps.groups), cfg.sampling.t_s)
         self.events = self._events.items  #: the run's events, oldest first (backend.run_events)
-        self._notes = notes
+        self.notes = notes  #: feasibility warnings of the scenario, reported as events when the run starts
         self.fillet = Fillet.of(cfg)  # for the frames' spread (backend.frames.frame_extra)
 
     # ---- events ----
@@ -182,7 +192,7 @@ class RunWorker:
         self.recording = RecordingSink(
             self.cfg, self.run_id, self.files.recording,
             tc_positions=self.cfg.tc_positions(self.scenario.tc4),
-            image_interval=self.settings.recording_image_interval_s,
+            image_interval=self.settings.recording_image_interval_s, live_url=self.live_url,
         )
         self.loop = self._factory(self.cfg, self.scenario, budget=self.budget())
         if self.stop_requested.is_set():  # stopped while the first plan was being made
@@ -191,7 +201,7 @@ class RunWorker:
         speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
         self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
                             f"{describe(sc.oscillation)}, {sc.duration:g} s, {speed}")
-        for note in self._notes:
+        for note in self.notes:
             self.add_event(0.0, f"feasibility: {note}", "warn")
         self._rebase(0.0)
         self._last_flush = time.monotonic()
@@ -228,6 +238,12 @@ class RunWorker:
             try:
                 if ch.kind == "reference":
                     fut = self.loop.set_reference(ch.value)
+                elif ch.kind == "faults":
+                    set_faults = getattr(self.loop, "set_faults", None)
+                    if not callable(set_faults):
+                        raise ValueError("faults can be injected only into a simulated furnace")
+                    set_faults(ch.value)
+                    fut = None  # in the furnace from the next sample on
                 else:
                     fut = self.loop.set_oscillation(ch.value)
             except Exception as exc:  # refused or failed before anything changed: the run goes on as it was
@@ -251,6 +267,8 @@ class RunWorker:
         if exc is None:
             if ch.kind == "reference":
                 self.reference = ch.value
+            elif ch.kind == "faults":
+                self.faults = [f.model_copy(update={"at": f.at + (t or 0.0)}) for f in ch.value]
             else:
                 self.oscillation = ch.value
             replan_s = time.monotonic() - t0
@@ -330,6 +348,8 @@ class RunWorker:
             self._add_queued()
             for text in events_of(snap.events):  # the loop put them into its record with the sample
                 self.add_event(float(snap.t), text, event_level(text), in_record=True)
+                if text.startswith(FAULT_EVENT_PREFIXES):
+                    self.fault_events.append({"t": float(snap.t), "text": text})
             for event in self._events.saturation.update(float(snap.t), snap.u):
                 self.add_event(event.t, event.text, event.level)
             wait = 0.0
@@ -355,8 +375,13 @@ class RunWorker:
 
     def live_series(self) -> dict[str, Any] | None:
         """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush, with the events
-        numbered as the frames number them (this worker's list); any thread."""
-        data = self._timeseries()
+        numbered as the frames number them (this worker's list); any thread.  ``None`` once the loop has
+        closed (a loop in its own process: the run's files have the series then)."""
+        try:
+            data = self._timeseries()
+        except RuntimeError as exc:  # backend.process_loop.LoopProcessError: the run ended meanwhile
+            log.info("run %s: live series unavailable (%s); read from its files", self.run_id, exc)
+            return None
         if data is not None:
             data.update(event_arrays(list(self.events)))
         return data
@@ -365,13 +390,19 @@ class RunWorker:
         """Append the new samples to the time series (``twin.runs.series_store``), store the latest values and
         push the recording's buffer to disk."""
         self._last_flush = time.monotonic()
+        append = getattr(self.loop, "append_series", None)  # a loop in its own process appends there
         record = getattr(self.loop, "record", None)
-        if record is not None and self.latest is not None:
+        if callable(append) and self.latest is not None:
+            append(str(self.files.folder))
+        elif record is not None and self.latest is not None:
             self.series.append(record)
         elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
             write_npz_atomic(self.files.timeseries, data)
         if self.recording is not None:
             self.recording.flush()
+        if self.fault_events or self.faults:
+            write_json_atomic(self.files.faults, {"injected": [f.model_dump(mode="json") for f in self.faults],
+                                                  "events": self.fault_events})
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 

@@ -2,16 +2,31 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
 
+class RadiationProgress(BaseModel):
+    stage: str = Field(description="waiting, loading the cache, ray tracing, building the model, then loading or "
+                                   "ray tracing the simulated furnace's own table, ready or failed")
+    done: int = Field(description="table positions ray-traced so far")
+    total: int = Field(description="table positions (0 until known)")
+    fraction: float = Field(ge=0.0, le=1.0)
+    elapsed_s: float
+    error: str | None = None
+
+
 class Health(BaseModel):
     status: str = Field(description="'ok' while the server answers")
+    radiation: Literal["ready", "computing", "failed"] = Field(
+        description="the radiation model: runs posted while 'computing' wait as 'queued'")
+    radiation_progress: RadiationProgress | None = None
     active_runs: int
     max_concurrent_runs: int
     viser_url: str | None = Field(None, description="the 3D view, when it runs")
+    rerun_url: str | None = Field(None, description="the rerun web viewer, when it runs (a run's recording: "
+                                                    "its links.rerun)")
     auth_required: bool = Field(description="mutating endpoints need the API token")
     disk: dict[str, Any] = Field(default_factory=dict,
                                  description="data directory: used_mb, free_mb (its disk), quota_mb, min_free_mb, "
@@ -26,6 +41,9 @@ class RunLinks(BaseModel):
     metrics: str
     recording: str
     timeseries: str
+    faults: str
+    rerun: str | None = Field(None, description="'Open in rerun': the server's rerun web viewer on this run "
+                                                "(live: its proxy; ended: its recording); null without a viewer")
 
 
 class RunCreated(BaseModel):
@@ -40,7 +58,7 @@ class RunCreated(BaseModel):
 
 class ChangeOut(BaseModel):
     id: int
-    kind: str = Field(description="'reference' or 'oscillation'")
+    kind: str = Field(description="'reference', 'oscillation' or 'faults'")
     body: dict[str, Any]
     requested_at: float = Field(description="unix s")
     status: str = Field(description="pending, applied, superseded (a later change of its kind won before it "
@@ -86,6 +104,11 @@ class RunDetail(RunSummary):
     reference: dict[str, Any] = Field(description="the reference in force now (after live changes); "
                                                   "for an ended run, the last one in force")
     oscillation: dict[str, Any] = Field(description="the oscillation in force now, likewise")
+    faults: list[dict[str, Any]] = Field(default_factory=list, description="the faults injected into the simulated "
+                                                                           "furnace ('at' in run time), likewise")
+    fault_events: list[dict[str, Any]] = Field(default_factory=list,
+                                               description="faults injected, cleared and detected by the twin: "
+                                                           "[{t (s), text}], oldest first")
     changes: list[ChangeOut] = Field(default_factory=list)
     files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
     windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "

@@ -68,7 +68,14 @@ class Settings(BaseSettings):
     client_send_timeout_s: float = Field(10.0, gt=0, description="drop a client that takes no frame this long")
     flush_interval_s: float = Field(2.0, gt=0, description="timeseries / database / recording flush (wall s)")
     recording_image_interval_s: float = Field(0.5, gt=0, description="simulated s between field images in the .rrd")
-    change_timeout_s: float = Field(60.0, gt=0, description="how long a PUT waits for its re-plan")
+    change_timeout_s: float = Field(5.0, gt=0, description="how long a PUT waits for its re-plan before it answers "
+                                                          "'pending' (HTTP clients give up at 10 s)")
+    rerun_connect: str | None = Field(None, description="stream every run live to this rerun viewer or gRPC proxy, "
+                                                        "e.g. rerun+http://127.0.0.1:9876/proxy")
+    rerun_web_port: int = Field(9090, ge=0, le=65535, description="rerun web viewer (loopback); 0 disables it")
+    rerun_grpc_port: int = Field(9877, ge=1, le=65535, description="the rerun web viewer's gRPC proxy (loopback)")
+    rerun_server_memory_limit: str = Field("512MiB", description="what the rerun proxy buffers for late viewers")
+    rerun_memory_limit: str = Field("2GiB", description="what the rerun viewer keeps; the oldest data goes first")
     opcua: OpcUaOptions = Field(default_factory=OpcUaOptions,
                                 description="furnaces over OPC UA (environment FURNACE_TWIN_OPCUA_*)")
     study_workers: int | None = Field(None, ge=1, le=256,

@@ -12,7 +12,8 @@ export function showFeasibility(report) {
   if (!report || report.verdict === "ok" || !report.messages.length) { box.hidden = true; box.innerHTML = ""; return; }
   box.hidden = false;
   box.className = `feas ${report.verdict}`;
-  const head = report.verdict === "refuse" ? "The server will refuse this run:" : "Warning: the furnace cannot quite follow this reference:";
+  const head = report.verdict === "refuse" ? "The server will refuse this run:"
+    : report.verdict === "pending" ? "Not checked yet:" : "Warning: the furnace cannot quite follow this reference:";
   box.innerHTML = `<b>${head}</b><ul>${report.messages.map((m) => `<li>${esc(m)}</li>`).join("")}</ul>`;
 }
 

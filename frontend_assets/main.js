@@ -4,6 +4,7 @@ import { api, forgetOldToken, token } from "./api.js";
 import { render, startRendering } from "./charts.js";
 import { refreshComparison, startComparing } from "./compare.js";
 import { initEstimatorCharts } from "./estimators.js";
+import { wireFaults } from "./faults.js";
 import { wireForms } from "./forms.js";
 import { wireHelp } from "./glossary.js";
 import { wireHeatScale } from "./heatmap.js";
@@ -25,7 +26,20 @@ export function showView(name) {
   window.dispatchEvent(new Event("resize")); // charts that were hidden take their size
 }
 
-const serverLine = () => { $("server-state").textContent = `server ok · ${state.health.active_runs} running`; };
+// "server ok · 1 running", and while the radiation model warms up its progress (runs wait as queued)
+function serverState(h) {
+  let text = `server ok · ${h.active_runs} running`;
+  const p = h.radiation_progress;
+  if (h.radiation === "computing") {
+    const done = p && p.total ? ` ${p.done}/${p.total} positions (${Math.round(100 * p.fraction)} %)` : "";
+    text += ` · radiation model: ${p ? p.stage : "computing"}${done}; new runs wait`;
+  } else if (h.radiation === "failed") {
+    text += ` · radiation model failed: ${p && p.error ? p.error : "see the server log"}`;
+  }
+  return text;
+}
+
+const serverLine = () => { $("server-state").textContent = serverState(state.health); };
 
 async function init() {
   forgetOldToken();
@@ -33,6 +47,7 @@ async function init() {
     [state.health, state.furnace, state.glossary] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace"),
       api("GET", "/api/glossary")]);
     applyLimits(state.furnace);
+    wireFaults();
     serverLine();
   } catch (e) {
     $("server-state").textContent = `server unreachable: ${e.message}`;
@@ -47,6 +62,7 @@ async function init() {
   for (const el of document.querySelectorAll(".tab")) el.addEventListener("click", () => showView(el.dataset.view));
   if (state.health.auth_required) { $("token-box").hidden = false; $("token").value = token(); }
   if (state.health.viser_url) { const a = $("viser-link"); a.href = state.health.viser_url; a.hidden = false; }
+  if (state.health.rerun_url) { const a = $("rerun-link"); a.href = state.health.rerun_url; a.hidden = false; }
   state.series = emptySeries();
   render();
   startRendering();

@@ -10,6 +10,7 @@ import { markShown, refreshRuns } from "./runlist.js";
 import { emptySeries, seriesFromStored } from "./series.js";
 import { state } from "./state.js";
 import { applyFrame, closeStream, connectStream } from "./stream.js";
+import { renderFaults } from "./faults.js";
 
 // The live controls act on the shown run only while it runs.
 function setControls(run) {
@@ -29,6 +30,10 @@ function fileLinks(run) {
   if (f.timeseries) links.push(`<a href="${base}/timeseries" download>npz</a>`);
   if (f.recording) links.push(`<a href="${base}/recording" download title="rerun recording: rerun FILE">rrd</a>`);
   if (state.health && state.health.viser_url) links.push(`<a href="${state.health.viser_url}" target="_blank" rel="noopener">3D view</a>`);
+  if (run.links && run.links.rerun) {
+    const what = LIVE.includes(run.status) ? "the live stream in the rerun web viewer" : "the recording in the rerun web viewer";
+    links.push(`<a href="${esc(run.links.rerun)}" target="_blank" rel="noopener" title="${what}">Open in rerun</a>`);
+  }
   return links.join(" ");
 }
 
@@ -92,6 +97,7 @@ export async function refreshRun(quiet = false) {
     badge(run.status);
     setControls(run);
     renderRunInfo(run);
+    renderFaults(run);
     if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
     if (changed) state.dirty = true; // reference markers, windows
   } catch (e) { /* transient */ }

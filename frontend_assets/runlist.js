@@ -19,7 +19,8 @@ function row(r) {
   const m = r.metrics || {}, base = `/api/runs/${r.id}`, live = LIVE.includes(r.status);
   const when = new Date((r.started_at || r.created_at) * 1000);
   const files = `<a href="${base}/export.csv" download>csv</a><a href="${base}/report.pdf" download>pdf</a>`
-    + `<a href="${base}/timeseries" download>npz</a><a href="${base}/recording" download>rrd</a>`;
+    + `<a href="${base}/timeseries" download>npz</a><a href="${base}/recording" download>rrd</a>`
+    + (r.links && r.links.rerun ? `<a href="${esc(r.links.rerun)}" target="_blank" rel="noopener" title="open in the rerun web viewer">rerun</a>` : "");
   return `<tr data-id="${esc(r.id)}"><td><input type="checkbox" class="cmp" aria-label="compare ${esc(r.id)}"${state.compare.has(r.id) ? " checked" : ""}></td>
     <td class="label"><button class="name" title="show this run">${esc(r.label || "(no label)")}</button>
       <button class="link edit" title="edit the label">✎</button><br><span class="id">${esc(r.id)}</span></td>

@@ -81,7 +81,10 @@ def test_server_caps_and_json_shape() -> None:
     assert j["oscillation"]["amplitude"] == {"min": 0.0, "max": 0.05, "exclusive_min": False, "unit": "m",
                                              "default": pytest.approx(0.048)}
     assert j["reference"]["setpoint"]["exclusive_min"] is True and j["speed"]["default"] == "max"
-    assert set(j) == {"reference", "duration", "oscillation", "tc4", "speed", "mismatch", "tc_noise", "seed", "truth"}
+    assert set(j) == {"reference", "duration", "oscillation", "tc4", "speed", "mismatch", "tc_noise", "seed", "truth",
+                      "faults"}
+    assert j["faults"]["targets"]["group"] == ["T1h", "T2h", "T3h", "T4h", "T1v", "T2v"]
+    assert j["faults"]["derate"]["max"] == 1.0 and j["faults"]["kinds"]["tc"] == ["stuck", "drift", "offset", "dropout"]
     # issue 10: the honest truth is the default everywhere, the model's own plant one choice away
     assert j["truth"] == {"choices": ["independent", "shared"], "default": "independent"}
 

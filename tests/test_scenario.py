@@ -21,6 +21,7 @@ def test_defaults_are_the_product_contract():
         "mismatch": {"emissivity": 0.0, "alpha": 0.0, "lamp_efficiency": 0.0},
         "tc_noise": 1.0,
         "seed": 0,
+        "faults": [],
         "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
         "plant": {"kind": "simulated"},  # product.md, "More scenario fields"
     }

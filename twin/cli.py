@@ -50,6 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--port", type=int, default=8000)
     s.add_argument("--viser-port", type=int, default=8080)
     s.add_argument("--data-dir", default=None, help="runs database and recordings (default ./furnace-data)")
+    s.add_argument("--rerun-connect", default=None, metavar="URL",
+                   help="stream every run live to this rerun viewer or gRPC proxy, e.g. "
+                        "rerun+http://127.0.0.1:9876/proxy (or FURNACE_TWIN_RERUN_CONNECT)")
+    s.add_argument("--rerun-web-port", type=int, default=None,
+                   help="port of the rerun web viewer on loopback (default 9090; 0 = none)")
 
     s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached): the twin's "
                        "model's and the simulated furnace's own")
@@ -142,7 +147,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             from backend.server import serve
 
             return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir,
-                         furnace=args.config or os.environ.get(CONFIG_ENV_VAR))
+                         furnace=args.config or os.environ.get(CONFIG_ENV_VAR), rerun_connect=args.rerun_connect,
+                         rerun_web_port=args.rerun_web_port)
         if args.command == "precompute":
             from twin.furnace.simulated.truth import precompute_truth
             from twin.radiation.cache import precompute_command

@@ -11,7 +11,8 @@ plant mismatch); the others come from the loaded furnace:
   tables (beyond it c_p and lambda would be extrapolated), default the paper's 1100 K;
 - reference point temperatures in that same range (one set of limits for every reference; a point
   may equal the initial temperature, a setpoint must lie above it);
-- TC4 position and TC noise default to the furnace's ``[sensors]``.
+- TC4 position and TC noise default to the furnace's ``[sensors]``;
+- injected faults name a TC (TC1..TC4) or one of the furnace's lamp groups.
 
 The backend reports them (``GET /api/furnace``) and both UIs build their inputs from them;
 ``twin.scenario.parse_scenario`` checks a scenario against them and fills what is left out.
@@ -92,6 +93,16 @@ MISMATCH_EMISSIVITY = Range(-0.5, 0.1, 0.0)
 MISMATCH_ALPHA = Range(-0.9, 2.0, 0.0)
 MISMATCH_LAMP_EFFICIENCY = Range(-0.5, 0.5, 0.0)
 SEED = Range(0, 2**31 - 1, 0)
+# injected faults (simulated furnace only): onset time, and the size of each kind that takes a value
+FAULT_AT = Range(0.0, MAX_DURATION_S, 0.0, "s")
+FAULT_DRIFT = Range(-50.0, 50.0, None, "K/s")
+FAULT_OFFSET = Range(-500.0, 500.0, None, "K")
+FAULT_DERATE = Range(0.0, 1.0, None, "")  # fraction of the group's power kept
+MAX_FAULTS = 32  # entries of one fault list
+TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
+TC_FAULT_KINDS = ("stuck", "drift", "offset", "dropout")
+GROUP_FAULT_KINDS = ("failed", "derate")
+
 #: the simulated furnace's truth (twin.scenario.Scenario.truth): its own, or the model's tables and ideal sensors
 TruthKind = Literal["independent", "shared"]
 TRUTH_CHOICES: tuple[TruthKind, ...] = ("independent", "shared")
@@ -108,6 +119,7 @@ class ScenarioLimits:
     amplitude: Range
     tc4: tuple[float, float]
     tc_noise: Range
+    groups: tuple[str, ...] = ()  # lamp group names, in the order of u (targets of lamp faults)
     t_E: Range = T_E
     point_time: Range = POINT_TIME
     point_count: Range = POINT_COUNT
@@ -146,6 +158,10 @@ class ScenarioLimits:
                          "lamp_efficiency": self.mismatch_lamp_efficiency.to_json()},
             "tc_noise": self.tc_noise.to_json(),
             "seed": self.seed.to_json(),
+            "faults": {"at": FAULT_AT.to_json(), "targets": {"tc": list(TC_NAMES), "group": list(self.groups)},
+                       "kinds": {"tc": list(TC_FAULT_KINDS), "group": list(GROUP_FAULT_KINDS)},
+                       "drift": FAULT_DRIFT.to_json(), "offset": FAULT_OFFSET.to_json(),
+                       "derate": FAULT_DERATE.to_json(), "max_entries": MAX_FAULTS},
             "truth": {"choices": list(TRUTH_CHOICES), "default": TRUTH_DEFAULT},
         }
 
@@ -165,6 +181,7 @@ def scenario_limits(cfg: FurnaceConfig, name: str | None = None) -> ScenarioLimi
                         why=f"eta_max of furnace '{name}'"),
         tc4=cfg.sensors.tc4,
         tc_noise=Range(0.0, TC_NOISE_MAX_K, cfg.sensors.noise, "K"),
+        groups=tuple(g.name for g in cfg.lamps.groups),
     )
 
 

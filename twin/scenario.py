@@ -173,6 +173,53 @@ class Mismatch(_Model):
     lamp_efficiency: Num = Field(0.0, ge=lim.MISMATCH_LAMP_EFFICIENCY.lo, le=lim.MISMATCH_LAMP_EFFICIENCY.hi)
 
 
+FaultKind = Literal["stuck", "drift", "offset", "dropout", "failed", "derate"]
+_VALUE_RANGE = {"drift": lim.FAULT_DRIFT, "offset": lim.FAULT_OFFSET, "derate": lim.FAULT_DERATE}
+
+
+class FaultSpec(_Model):
+    """A fault injected into the simulated furnace at run time ``at`` (product.md, ``faults``).
+
+    TC1..TC4: ``stuck`` (reads the value it had at ``at``), ``drift`` (``value`` K/s added from ``at``),
+    ``offset`` (``value`` K added), ``dropout`` (no reading: status "bad").  A lamp group (a name of
+    ``GET /api/furnace``'s groups): ``failed`` (no power), ``derate`` (keeps the fraction ``value``).
+    In ``PUT /api/runs/{id}/faults``, ``at`` counts from now.
+    """
+
+    at: Num = Field(lim.FAULT_AT.default, ge=lim.FAULT_AT.lo, le=lim.FAULT_AT.hi,
+                      description="s of run time (of a PUT: from now)")
+    target: str = Field(description="TC1..TC4, or a lamp group name (GET /api/furnace)")
+    kind: FaultKind
+    value: Num | None = Field(None, description="drift K/s, offset K, derate fraction kept; "
+                                                  "none for stuck, dropout, failed")
+
+    @model_validator(mode="after")
+    def _consistent(self, info: ValidationInfo) -> FaultSpec:
+        groups = _limits(info).groups
+        on_tc = self.kind in lim.TC_FAULT_KINDS
+        if on_tc and self.target not in lim.TC_NAMES:
+            raise ValueError(f"target: a {self.kind} fault needs a thermocouple {'/'.join(lim.TC_NAMES)}, "
+                             f"got {self.target!r}")
+        if not on_tc and self.target not in groups:
+            raise ValueError(f"target: a {self.kind} fault needs a lamp group of this furnace "
+                             f"({', '.join(groups)}), got {self.target!r}")
+        r = _VALUE_RANGE.get(self.kind)
+        if r is None and self.value is not None:
+            raise ValueError(f"value: a {self.kind} fault takes no value")
+        if r is not None:
+            if self.value is None:
+                raise ValueError(f"value: a {self.kind} fault needs a value ({r.unit or 'fraction kept'})")
+            problem = r.problem(self.value)
+            if problem is not None:
+                raise ValueError(f"value: {problem}")
+        return self
+
+    def describe(self) -> str:
+        """E.g. 'TC2 drift 0.5 K/s', 'T3h failed'."""
+        unit = {"drift": " K/s", "offset": " K", "derate": " kept"}.get(self.kind, "")
+        return f"{self.target} {self.kind}" + ("" if self.value is None else f" {self.value:g}{unit}")
+
+
 class EstimatorChoice(_Model):
     """How the twin estimates (issue 11): the model's motion and whether it calibrates parameters.
 
@@ -233,6 +280,8 @@ class Scenario(_Model):
     tc_noise: Num = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")
     seed: Int = Field(lim.SEED.default, ge=lim.SEED.lo, le=lim.SEED.hi)
+    faults: list[FaultSpec] = Field(default_factory=list, max_length=lim.MAX_FAULTS,
+                                    description="faults injected into the simulated furnace at run time")
     estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
     truth: lim.TruthKind = Field(
         lim.TRUTH_DEFAULT,
@@ -259,6 +308,8 @@ class Scenario(_Model):
     def _speed_of_plant(self) -> Scenario:
         if self.plant.kind == "opcua" and self.speed != 1.0:
             raise ValueError(f"speed: a furnace over OPC UA runs in real time; speed must be 1 (got {self.speed!r})")
+        if self.plant.kind != "simulated" and self.faults:
+            raise ValueError("faults: only the simulated furnace takes injected faults, not one over OPC UA")
         return self
 
     @field_validator("tc4")
@@ -283,6 +334,7 @@ class Scenario(_Model):
 
 
 _REFERENCE: TypeAdapter[Reference] = TypeAdapter(Reference)
+_FAULTS: TypeAdapter[list[FaultSpec]] = TypeAdapter(Annotated[list[FaultSpec], Field(max_length=lim.MAX_FAULTS)])
 
 
 def parse_scenario(data: Any, limits: ScenarioLimits | None = None) -> Scenario:
@@ -301,6 +353,11 @@ def parse_reference(data: Any, limits: ScenarioLimits | None = None) -> Transiti
     return _REFERENCE.validate_python(data, context={"limits": limits or _DEFAULT})
 
 
+def parse_faults(data: Any, limits: ScenarioLimits | None = None) -> list[FaultSpec]:
+    """A fault list (``PUT .../faults``) checked against ``limits`` (TC names, the furnace's lamp groups)."""
+    return _FAULTS.validate_python(data, context={"limits": limits or _DEFAULT})
+
+
 def check(value: Scenario | OscillationSpec | TransitionReference | PointsReference, limits: ScenarioLimits) -> None:
     """Raise ``pydantic.ValidationError`` (naming the field) if a scenario, oscillation or reference that was
     built elsewhere (e.g. without a furnace) lies outside ``limits``."""
@@ -313,14 +370,18 @@ def check(value: Scenario | OscillationSpec | TransitionReference | PointsRefere
         parse_reference(data, limits)
 
 
-def describe(value: TransitionReference | PointsReference | OscillationSpec) -> str:
-    """A reference or an oscillation in a few plain words (the run's events, the dashboard).
+def describe(value: TransitionReference | PointsReference | OscillationSpec | list[FaultSpec]) -> str:
+    """A reference, an oscillation or a list of faults in a few plain words (the run's events, the dashboard).
 
     >>> describe(TransitionReference(setpoint=1050.0, t_E=30.0)), describe(OscillationSpec())
     ('1050 K in 30 s', 'off')
     >>> describe(PointsReference(points=[(20.0, 1000.0), (60.0, 1050.0)]))
     'points 20 s → 1000 K, 60 s → 1050 K'
+    >>> describe([]), describe(parse_faults([{"at": 5.0, "target": "TC2", "kind": "offset", "value": 20.0}]))
+    ('no faults', 'TC2 offset 20 K at +5 s')
     """
+    if isinstance(value, list):
+        return ", ".join(f"{f.describe()} at +{f.at:g} s" for f in value) or "no faults"
     if isinstance(value, OscillationSpec):
         if not value.enabled:
             return "off"

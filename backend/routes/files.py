@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query, status
+from fastapi import APIRouter, HTTPException, Query, Request, status
 from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
@@ -31,10 +31,24 @@ def _file(run_id: str, manager: ManagerDep, which: str) -> Path:
 @router.get("/{run_id}/recording", response_class=FileResponse,
             responses={200: {"content": {"application/octet-stream": {}}},
                        404: {"description": "no such run or no recording"}})
-def recording(run_id: str, manager: ManagerDep) -> FileResponse:
-    """The rerun recording (``.rrd``); open it with ``rerun FILE``."""
+def recording(run_id: str, manager: ManagerDep, request: Request) -> FileResponse:
+    """The rerun recording (``.rrd``); open it with ``rerun FILE``, or in the server's rerun web viewer
+    (the run's ``links.rerun``: this file is readable from the viewer's origin)."""
     path = _file(run_id, manager, "recording")
-    return FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd")
+    response = FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd")
+    origin = request.headers.get("origin")
+    if origin is not None and origin in viewer_origins(request):
+        response.headers["Access-Control-Allow-Origin"] = origin
+        response.headers["Vary"] = "Origin"
+    return response
+
+
+def viewer_origins(request: Request) -> set[str]:
+    """The origins of the server's rerun web viewer (loopback by name and by address)."""
+    viewer = getattr(request.app.state, "rerun_viewer", None)
+    if viewer is None:
+        return set()
+    return {f"http://127.0.0.1:{viewer.web_port}", f"http://localhost:{viewer.web_port}"}
 
 
 @router.get("/{run_id}/timeseries", response_class=FileResponse,

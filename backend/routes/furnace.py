@@ -42,6 +42,7 @@ def furnace(manager: ManagerDep) -> FurnaceOut:
 async def feasibility(manager: ManagerDep, scenario: ScenarioBody) -> dict[str, Any]:
     """Would ``POST /api/runs`` start this scenario, and can the furnace follow its reference?
     ``verdict``: ``ok``, ``warn`` (starts; ``messages`` say when and by how much the fillet mean falls
-    behind) or ``refuse`` (a 422 on start); ``best``: the closest fillet mean the furnace can reach
+    behind), ``refuse`` (a 422 on start) or ``pending`` (the radiation model is still loading: only the limits
+    were checked, a run would wait as ``queued``); ``best``: the closest fillet mean the furnace can reach
     (``t``, ``T``); ``hold_range``: the means it can hold (lamps off, full power) in K.  Nothing is started."""
     return await manager.checks.preview(scenario)

@@ -1,13 +1,13 @@
-"""``/api/runs``: start, list, inspect, stop, change reference / oscillation, metrics."""
+"""``/api/runs``: start, list, inspect, stop, change reference / oscillation / injected faults, metrics."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Header, HTTPException, Query, Response, status
+from fastapi import APIRouter, Header, HTTPException, Query, Request, Response, status
 
-from backend.deps import ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
-from backend.repository import RunRow
+from backend.deps import FaultsBody, ManagerDep, OscillationBody, ReferenceBody, ScenarioBody, TokenDep
+from backend.repository import ACTIVE_STATUSES, RunRow
 from backend.run_manager import RunManager
 from backend.schemas import (
     ChangeOut,
@@ -24,10 +24,21 @@ from twin.runs.metrics import windows_from
 router = APIRouter(prefix="/api/runs", tags=["runs"])
 
 
-def links(run_id: str) -> RunLinks:
+def links(run_id: str, rerun: str | None = None) -> RunLinks:
     base = f"/api/runs/{run_id}"
     return RunLinks(self=base, stream=f"{base}/stream", metrics=f"{base}/metrics",
-                    recording=f"{base}/recording", timeseries=f"{base}/timeseries")
+                    recording=f"{base}/recording", timeseries=f"{base}/timeseries", faults=f"{base}/faults",
+                    rerun=rerun)
+
+
+def rerun_link(request: Request | None, manager: RunManager, run_id: str, state: str) -> str | None:
+    """The server's rerun web viewer on a run: its live stream while it goes, else its recording file."""
+    viewer = None if request is None else getattr(request.app.state, "rerun_viewer", None)
+    if viewer is None or request is None:
+        return None
+    if state in ACTIVE_STATUSES and manager.live_url:
+        return str(viewer.link(manager.live_url))
+    return str(viewer.link(f"{str(request.base_url).rstrip('/')}/api/runs/{run_id}/recording"))
 
 
 def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
@@ -40,10 +51,11 @@ def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
     return {**scenario, "reference": {"points": len(pts), "t_E": pts[-1][0], "setpoint": pts[-1][1]}}
 
 
-def summary(row: RunRow, manager: RunManager, *, whole: bool = True) -> RunSummary:
+def summary(row: RunRow, manager: RunManager, *, whole: bool = True, request: Request | None = None) -> RunSummary:
+    state = manager.status(row.id) or row.status
     return RunSummary(
         id=row.id,
-        status=manager.status(row.id) or row.status,
+        status=state,
         created_at=row.created_at,
         started_at=row.started_at,
         ended_at=row.ended_at,
@@ -52,7 +64,7 @@ def summary(row: RunRow, manager: RunManager, *, whole: bool = True) -> RunSumma
         metrics=row.metrics,
         error=row.error,
         label=row.label,
-        links=links(row.id),
+        links=links(row.id, rerun_link(request, manager, row.id, state)),
     )
 
 
@@ -79,13 +91,14 @@ async def start_run(
 
 
 @router.get("", response_model=list[RunSummary])
-def list_runs(manager: ManagerDep, limit: Annotated[int, Query(ge=1, le=1000)] = 200) -> list[RunSummary]:
+def list_runs(manager: ManagerDep, request: Request,
+              limit: Annotated[int, Query(ge=1, le=1000)] = 200) -> list[RunSummary]:
     """All runs, newest first; a points reference is summarised as ``{"points": count, "t_E", "setpoint"}``."""
-    return [summary(r, manager, whole=False) for r in manager.runs(limit)]
+    return [summary(r, manager, whole=False, request=request) for r in manager.runs(limit)]
 
 
 @router.get("/{run_id}", response_model=RunDetail, responses={404: {"description": "no such run"}})
-def get_run(run_id: str, manager: ManagerDep) -> RunDetail:
+def get_run(run_id: str, manager: ManagerDep, request: Request) -> RunDetail:
     """One run: status, scenario, the reference and oscillation in force, latest values, metrics,
     the changes made while it ran."""
     row = manager.run(run_id)
@@ -98,9 +111,11 @@ def get_run(run_id: str, manager: ManagerDep) -> RunDetail:
         float(end[0]), float(end[1]),
         ((c.applied_t, c.kind, c.body) for c in changes if c.status == "applied" and c.applied_t is not None))
     return RunDetail(
-        **summary(row, manager).model_dump(),
+        **summary(row, manager, request=request).model_dump(),
         reference=now.reference,
         oscillation=now.oscillation,
+        faults=now.faults,
+        fault_events=manager.fault_events(row.id),
         changes=[ChangeOut(**c.__dict__) for c in changes],
         files={"recording": files.recording.is_file(), "timeseries": files.timeseries.is_file(),
                "metrics": files.metrics.is_file()},
@@ -171,6 +186,17 @@ async def change_oscillation(run_id: str, manager: ManagerDep, oscillation: Osci
     A field left out takes the furnace's default (``GET /api/furnace``), not the run's current value."""
     manager.run(run_id)
     return _change_result(await manager.change(run_id, "oscillation", oscillation), response)
+
+
+@router.put("/{run_id}/faults", response_model=ChangeResult, dependencies=[TokenDep],
+            responses={**CHANGE_RESPONSES,
+                       422: {"description": "invalid faults, or a furnace that takes none (a real one)"}})
+async def change_faults(run_id: str, manager: ManagerDep, faults: FaultsBody, response: Response) -> ChangeResult:
+    """Replace the faults injected into the run's simulated furnace: TC1..TC4 stuck, drift (K/s), offset (K),
+    dropout; a lamp group failed or derated (fraction kept).  Each ``at`` counts from now; ``[]`` clears them.
+    The twin is not told: it must find them in its own data (the run's events and ``fault_events``)."""
+    manager.run(run_id)
+    return _change_result(await manager.change(run_id, "faults", faults), response)
 
 
 @router.get("/{run_id}/metrics", response_model=dict[str, Any],

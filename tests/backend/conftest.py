@@ -189,6 +189,15 @@ def browser():
         b.close()
 
 
+def wait_model_ready(c: Any, timeout: float = 300.0) -> None:
+    """Until ``GET /api/health`` says the radiation models are ready: a POST before that is queued and checked
+    later (test_warm_up.py), so a test of what POST itself refuses waits for them."""
+    end = time.monotonic() + timeout
+    while (h := c.get("/api/health").json())["radiation"] != "ready":
+        assert h["radiation"] != "failed" and time.monotonic() < end, h
+        time.sleep(0.05)
+
+
 def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float = 120.0) -> dict:
     """Poll ``GET /api/runs/{id}`` until the run reaches one of ``statuses`` (generous for loaded CI)."""
     end = time.monotonic() + timeout

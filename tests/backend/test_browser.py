@@ -25,7 +25,7 @@ LIVE_RUN = {"duration": 600.0, "speed": 2.0, "reference": {"setpoint": 900.0, "t
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory, small_cfg):
-    s = Settings(data_dir=tmp_path_factory.mktemp("browser"), viser_port=free_port())
+    s = Settings(data_dir=tmp_path_factory.mktemp("browser"), viser_port=free_port(), change_timeout_s=120.0)
     with ThreadedServer(create_app(s, small_cfg, viser=True), free_port()) as srv:
         srv.viser_url = f"http://127.0.0.1:{s.viser_port}/"
         yield srv
@@ -241,7 +241,7 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
     path = tmp_path / "low_stroke.toml"
     path.write_text('base = "default"\n[oscillation]\neta_max = 0.03\n')
     cfg = load_config(path)
-    s = Settings(data_dir=tmp_path / "data", viser_port=0, max_duration_s=900.0)
+    s = Settings(data_dir=tmp_path / "data", viser_port=0, max_duration_s=900.0, change_timeout_s=120.0)
     app = create_app(s, cfg, loop_factory=fake_factory(), furnace_name=furnace_name(cfg, path))
     with ThreadedServer(app, free_port()) as srv:
         page, errors = _open_dashboard(browser, srv.url)

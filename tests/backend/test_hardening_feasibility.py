@@ -14,12 +14,14 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
+from conftest import wait_model_ready
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory, small_cfg):
     with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("absurd")), small_cfg),
                     base_url="http://127.0.0.1") as c:
+        wait_model_ready(c)  # during the warm-up a POST is queued and checked later (test_warm_up.py)
         yield c
 
 

@@ -8,10 +8,13 @@ run had stopped.  Finding 10: a PUT answered "applied" before its re-plan ran, f
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from fastapi.testclient import TestClient
@@ -20,16 +23,23 @@ from backend.app import create_app
 from backend.loop_factory import DefaultLoopFactory
 from backend.settings import Settings
 from backend.threaded_server import free_port
-from conftest import REPO, wait_status
+from conftest import REPO, wait_model_ready, wait_status
 
 LONG_PLAN = {"reference": {"setpoint": 1100.0, "t_E": 600.0}, "duration": 600.0}  # ~a minute or more to plan
 # the live changes below go to 700 K in 15 s from about 300 K: a reference the furnace can follow (a steeper one
 # is refused before it reaches the run, twin.control.feasibility; these tests are about planning)
 
 
-def real_client(tmp_path, cfg, **settings) -> TestClient:
+@contextmanager
+def real_client(tmp_path, cfg, *, processes: bool = True, **settings) -> Iterator[TestClient]:
+    """A client of the real app once its radiation model is ready (a POST during the warm-up is queued and
+    checked later: test_warm_up.py).  ``processes=False``: the runs' loops in this process, where a test's
+    monkeypatch reaches their planning."""
     s = Settings(data_dir=tmp_path / "data", viser_port=0, **settings)
-    return TestClient(create_app(s, cfg, loop_factory=DefaultLoopFactory()), base_url="http://127.0.0.1")
+    app = create_app(s, cfg, loop_factory=DefaultLoopFactory(processes=processes))
+    with TestClient(app, base_url="http://127.0.0.1") as c:
+        wait_model_ready(c)
+        yield c
 
 
 def test_finding_01_short_run_with_long_transition_starts_at_once(tmp_path, small_cfg) -> None:
@@ -80,7 +90,7 @@ def test_finding_10_put_answers_when_planned(tmp_path, small_cfg, monkeypatch) -
         return solve(*a, **k)
 
     scenario = {"reference": {"setpoint": 800.0, "t_E": 10.0}, "duration": 120.0, "speed": 1.0}
-    with real_client(tmp_path, small_cfg, change_timeout_s=0.5) as c:
+    with real_client(tmp_path, small_cfg, processes=False, change_timeout_s=0.5) as c:
         run_id = c.post("/api/runs", json=scenario).json()["id"]
         wait_status(c, run_id, {"running"}, timeout=180.0)
         monkeypatch.setattr(replan_module, "solve_feedforward", slow)
@@ -99,7 +109,8 @@ def test_finding_10_put_answers_when_planned(tmp_path, small_cfg, monkeypatch) -
         assert run["reference"] == {"setpoint": 700.0, "t_E": 15.0}
         c.post(f"/api/runs/{run_id}/stop")
         wait_status(c, run_id, {"stopped"})
-    with real_client(tmp_path / "b", small_cfg, change_timeout_s=600.0) as c:  # wait for it however loaded
+    # change_timeout_s: wait for it however loaded
+    with real_client(tmp_path / "b", small_cfg, processes=False, change_timeout_s=600.0) as c:
         run_id = c.post("/api/runs", json=scenario).json()["id"]
         wait_status(c, run_id, {"running"}, timeout=180.0)
         t0 = time.monotonic()
@@ -129,7 +140,7 @@ def test_finding_10_failed_replan_is_not_applied(tmp_path, small_cfg, monkeypatc
     from twin.control.plan import FeedforwardError
 
     scenario = {"reference": {"setpoint": 800.0, "t_E": 10.0}, "duration": 120.0, "speed": 1.0}
-    with real_client(tmp_path, small_cfg) as c:
+    with real_client(tmp_path, small_cfg, processes=False) as c:
         run_id = c.post("/api/runs", json=scenario).json()["id"]
         wait_status(c, run_id, {"running"}, timeout=180.0)
 
@@ -153,7 +164,7 @@ import logging, sys
 logging.basicConfig(level=logging.INFO)
 from backend.server import serve
 from twin.config import small_config
-sys.exit(serve(small_config(), host="127.0.0.1", port={port}, viser_port=0, data_dir={data!r}))
+sys.exit(serve(small_config(), host="127.0.0.1", port={port}, viser_port=0, data_dir={data!r}, rerun_web_port=0))
 """
 
 
@@ -162,19 +173,26 @@ def test_finding_13_sigterm_during_setup_ends_quickly(tmp_path) -> None:
     import httpx
 
     port = free_port()
+    # the run must start (not be refused because the machine is too loaded to plan it in 120 s)
+    env = {**os.environ, "FURNACE_TWIN_PLAN_MAX_S": "3600"}
     proc = subprocess.Popen([sys.executable, "-c", SERVE.format(port=port, data=str(tmp_path / "data"))],
-                            cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     try:
         url = f"http://127.0.0.1:{port}"
         end = time.monotonic() + 120
         while time.monotonic() < end:
             try:
-                if httpx.get(f"{url}/api/health", timeout=2).status_code == 200:
+                if httpx.get(f"{url}/api/health", timeout=2).json()["radiation"] == "ready":
                     break
             except httpx.HTTPError:
-                time.sleep(0.2)
-        run_id = httpx.post(f"{url}/api/runs", json=LONG_PLAN, timeout=120).json()["id"]
-        while httpx.get(f"{url}/api/runs/{run_id}", timeout=10).json()["status"] != "starting":
+                pass
+            time.sleep(0.2)
+        r = httpx.post(f"{url}/api/runs", json=LONG_PLAN, timeout=120)
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
+        end = time.monotonic() + 120
+        while (status := httpx.get(f"{url}/api/runs/{run_id}", timeout=10).json()["status"]) != "starting":
+            assert status in ("queued",) and time.monotonic() < end, status
             time.sleep(0.1)
         time.sleep(1.0)
         t0 = time.monotonic()

@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.settings import Settings
-from conftest import stream_frames, wait_status
+from conftest import stream_frames, wait_model_ready, wait_status
 
 # 30 s: a change is in force once re-planned, which takes seconds of wall time on a loaded machine; short and
 # steep, yet within what the furnace can follow (twin.control.feasibility: warned, not refused)
@@ -30,7 +30,10 @@ ABSURD_AT = 8.0
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory, small_cfg):
     data = tmp_path_factory.mktemp("lifecycle")
-    with TestClient(create_app(Settings(data_dir=data), small_cfg), base_url="http://127.0.0.1") as c:
+    # a PUT answers when its re-plan is done (not "pending" after the default 5 s on a loaded machine)
+    with TestClient(create_app(Settings(data_dir=data, change_timeout_s=120.0), small_cfg),
+                    base_url="http://127.0.0.1") as c:
+        wait_model_ready(c)  # the POST's feasibility warnings come with its answer once the model is ready
         r = c.post("/api/runs", json=SCENARIO)
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
@@ -169,6 +172,7 @@ def test_unreachable_reference_is_refused_before_a_run_starts(tmp_path, small_cf
     """With the real loop factory, POST checks the reference against what the furnace can hold: a 422
     that says why, instead of a run that would end far from its reference."""
     with TestClient(create_app(Settings(data_dir=tmp_path), small_cfg), base_url="http://127.0.0.1") as c:
+        wait_model_ready(c)  # during the warm-up a POST is queued and checked later (test_warm_up.py)
         # 350 K is above the initial 300 K, but with the lamps off the warm holders and walls keep the
         # specimen near 480 K (twin.control.feasibility.hold_range): the last point cannot be held
         r = c.post("/api/runs", json={"reference": {"points": [[60.0, 900.0], [120.0, 350.0]]}, "duration": 240.0})

@@ -19,7 +19,7 @@ SERVE = (
     "import sys, logging; logging.basicConfig(level=logging.INFO);"
     "from backend.server import serve; from twin.config import small_config;"
     "sys.exit(serve(small_config(), host='127.0.0.1', port=int(sys.argv[1]), viser_port=int(sys.argv[2]),"
-    " data_dir=sys.argv[3]))"
+    " data_dir=sys.argv[3], rerun_web_port=0))"  # no rerun web viewer (its default port may be taken)
 )
 
 

@@ -20,7 +20,7 @@ def _live_controls(view) -> list[bool]:
 
 
 def test_pick_a_finished_run_and_back(tmp_path, small_cfg) -> None:
-    s = Settings(data_dir=tmp_path / "data", viser_port=free_port())
+    s = Settings(data_dir=tmp_path / "data", viser_port=free_port(), change_timeout_s=120.0)
     app = create_app(s, small_cfg, loop_factory=fake_factory(), viser=True)
     with TestClient(app, base_url="http://127.0.0.1") as c:
         view = app.state.viser

@@ -358,7 +358,9 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
         inputs = ScaledDistribution(m, grid.K, fw.smoothing)
         lbx = np.zeros(inputs.n_params)
         eta = heating_efficiency(model, theta_lin)
-        ubx = np.concatenate([1.0 / eta, np.full(grid.K, V_MAX)])  # d_i <= 1 / eta_i from eta^T d = 1
+        with np.errstate(divide="ignore"):  # d_i <= 1 / eta_i from eta^T d = 1; a failed group's d_i = 0
+            d_max = np.where(eta > 0, 1.0 / eta, 0.0)
+        ubx = np.concatenate([d_max, np.full(grid.K, V_MAX)])
         x_init = parametrized_guess(model, grid, n_heun, T_knots, th0, warm_start, eta, fw.smoothing)
     else:
         inputs = FreeInputs(m, grid.K)

@@ -103,12 +103,18 @@ def tracking_amplification(model: DiscreteDynamics, dt: float, n_heun: int, T_kn
 
 def heating_efficiency(model: DiscreteDynamics, theta: Array) -> Array:
     """eta_i = c_m^T dF/du_i / t_s: fillet-mean heating rate (K/s) per unit fraction of group i,
-    normalized to mean 1 (eqs. 12a, 19).  Used to normalize the distribution: eta^T d = 1."""
+    normalized to mean 1 over the working groups (eqs. 12a, 19).  Used to normalize the distribution:
+    eta^T d = 1.  A failed group (its column of dF/du is zero: the model of a run whose fault detection
+    took it as failed) gets eta_i = 0, and the OCP holds its d_i at 0."""
     B = np.asarray(model.jac_u(theta, np.full(model.m, 0.5)), float) / model.t_s
     eta = np.asarray(model.c_m, float) @ B
-    if np.any(eta <= 0):
+    dead = ~np.any(B != 0.0, axis=0)
+    if dead.all():
+        raise FeedforwardError("no lamp group heats the specimen", "model")
+    if np.any(eta[~dead] <= 0):
         raise FeedforwardError("a lamp group does not heat the fillet (c_m^T B_i <= 0)", "model")
-    return np.asarray(eta / eta.mean(), float)
+    eta[dead] = 0.0
+    return np.asarray(eta / eta[~dead].mean(), float)
 
 
 def parametrized_guess(model: DiscreteDynamics, grid: KnotGrid, n_heun: int, T_knots: Array, th0: Array,

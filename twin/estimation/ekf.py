@@ -66,12 +66,16 @@ class UpdateInfo:
     normalized : (p,) |innovation| / sqrt(S_ii)
     used : (p,) bool, readings that entered the update
     reasons : (p,) "" if used, else "missing" or "gated"
+    S : (p, p) innovation covariance C P^- C^T + R of all p readings (K^2), for fault tests
+    gain : (n, p) Kalman gain L_j applied (zero columns for readings left out), for fault signatures
     """
 
     innovation: Array
     normalized: Array
     used: NDArray[np.bool_]
     reasons: tuple[str, ...] = field(default_factory=tuple)
+    S: Array | None = None
+    gain: Array | None = None
 
 
 def process_noise(M: Array, q0: float, q1: float) -> Array:
@@ -155,9 +159,8 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float,
         for i, why in enumerate(reasons):
             if why:
                 log.warning("EKF: TC%d reading %s left out (%s, %.1f sigma)", i + 1, yv[i], why, normalized[i])
-    info = UpdateInfo(innov, normalized, used, reasons)
     if not used.any():
-        return state, info
+        return state, UpdateInfo(innov, normalized, used, reasons, S_full, np.zeros_like(PCt_full))
     if all_used:  # the normal case: no fancy indexing (it costs more than the algebra at p = 3)
         nu, PCt, S = innov, PCt_full, S_full
     else:
@@ -165,6 +168,12 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float,
     gain = _gain(S, PCt)
     if consider:
         gain[-consider:] = 0.0
+    if all_used:
+        gain_full = gain
+    else:
+        gain_full = np.zeros_like(PCt_full)
+        gain_full[:, used] = gain
+    info = UpdateInfo(innov, normalized, used, reasons, S_full, gain_full)
     theta = state.theta + gain @ nu
     # Joseph form (I - K C) P (I - K C)^T + K R K^T, expanded with S = C P C^T + R:
     #   P - K (P C^T)^T - (P C^T) K^T + K S K^T = P - U V^T,  U = [K, P C^T - K S],  V = [P C^T, K],

@@ -101,6 +101,8 @@ class JointEstimator:
         # same (the averaged model, a fixed specimen): (version of the pieces, weights, J in the covariance dtype)
         self._pieces_version = 0
         self._assembled: tuple[int, tuple[float, ...], NDArray[Any]] | None = None
+        #: dF/dp of the last prediction (n, k), the upper right block of Phi_x (16); zeros before the first
+        self.parameter_jacobian: Array = np.zeros((n, k))
 
     # ---- the estimate
     @property
@@ -192,6 +194,7 @@ class JointEstimator:
             return J
         Phi = np.zeros((n + k, n + k), dtype=self._cov_dtype)
         Phi[:n, :n] = J
-        Phi[:n, n:] = model.jac_p_of(e)
+        self.parameter_jacobian = np.asarray(model.jac_p_of(e), float)
+        Phi[:n, n:] = self.parameter_jacobian
         Phi[n:, n:] = np.eye(k)
         return Phi

@@ -34,13 +34,14 @@ Example
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.scenario import OscillationSpec
+from twin.scenario import FaultSpec, OscillationSpec
 
 Array = NDArray[np.float64]
 
@@ -143,4 +144,25 @@ class Furnace(Protocol):
 
     def close(self) -> None:
         """Release the furnace (a real one: lamps commanded off where the link allows)."""
+        ...
+
+
+@runtime_checkable
+class FaultInjectable(Protocol):
+    """A furnace that faults can be injected into (the simulated one: :mod:`twin.furnace.simulated.faults`).
+
+    Only the loop uses it, to pass the scenario's and the user's faults on and to record when they
+    start; the twin (estimator, detector, controller) never sees it.
+    """
+
+    def set_faults(self, faults: Sequence[FaultSpec], t: float) -> None:
+        """Replace the injected faults from run time ``t`` on (their ``at`` counted from ``t``)."""
+        ...
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        """The injected faults, ``at`` in run time."""
+        ...
+
+    def take_fault_events(self) -> list[str]:
+        """Faults that started or were cleared since the last call, as sentences."""
         ...

@@ -19,6 +19,7 @@ import logging
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,8 +87,12 @@ def _save(path: Path, table: ExchangeTable) -> None:
         raise
 
 
+#: ``on_position(done, total)``: called as positions of the table are ray-traced (a server's warm-up)
+ProgressFn = Callable[[int, int], None]
+
+
 def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | None = None,
-                  symmetric: bool = False) -> ExchangeTable:
+                  symmetric: bool = False, on_position: ProgressFn | None = None) -> ExchangeTable:
     """Ray-trace F^s at every position (plainly, or with the furnace's mirror symmetries) and build P1, P2
     (no cache involved)."""
     optics = surface_optics(cfg)
@@ -97,9 +102,19 @@ def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | 
         from tqdm import tqdm
 
         bar = tqdm(total=n, desc="exchange factors", unit="position")
+    done = 0
+
+    def one_more() -> None:
+        nonlocal done
+        done += 1
+        if bar is not None:
+            bar.update()
+        if on_position is not None:
+            on_position(done, n)
+
     try:
         trace = symmetric_exchange_table if symmetric else exchange_factor_table
-        eta, F = trace(cfg, workers=workers, on_position=bar.update if bar else None)
+        eta, F = trace(cfg, workers=workers, on_position=one_more)
     finally:
         if bar is not None:
             bar.close()
@@ -110,9 +125,10 @@ def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | 
 
 def load_or_compute(
     cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, force: bool = False,
-    symmetric: bool = False,
+    symmetric: bool = False, on_position: ProgressFn | None = None,
 ) -> ExchangeTable:
-    """The table of ``cfg`` from the cache, computing and storing it if missing (or ``force``)."""
+    """The table of ``cfg`` from the cache, computing and storing it if missing (or ``force``);
+    ``on_position(done, total)`` follows a ray trace."""
     path = cache_path(cfg, cache_dir, symmetric=symmetric)
     optics = surface_optics(cfg)
     if path.exists() and not force:
@@ -128,7 +144,7 @@ def load_or_compute(
             return _load(path, optics)
         t0 = time.perf_counter()
         log.info("ray-tracing exchange factors for %d positions into %s", len(eta_nodes(cfg)), path)
-        table = compute_table(cfg, progress=progress, symmetric=symmetric)
+        table = compute_table(cfg, progress=progress, symmetric=symmetric, on_position=on_position)
         _save(path, table)
         log.info("exchange factors computed in %.1f s", time.perf_counter() - t0)
         return table

@@ -18,6 +18,7 @@ True
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -156,7 +157,8 @@ def lamp_flux_max(cfg: FurnaceConfig) -> Array:
 
 
 def radiation_model(
-    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, symmetric: bool = False
+    cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False, symmetric: bool = False,
+    on_position: Callable[[int, int], None] | None = None,
 ) -> RadiationModel:
     """Radiation model of ``cfg``: cached F^s (or ray-traced now) and the matrices of eqs. (4)-(5).
 
@@ -166,10 +168,12 @@ def radiation_model(
     cache_dir : directory of the F^s cache (default ``$FURNACE_TWIN_CACHE`` or ``~/.cache/furnace-twin``)
     progress : show a tqdm progress bar while ray tracing
     symmetric : trace with the chamber's mirror symmetries (:mod:`twin.radiation.symmetry`), cached apart
+    on_position : ``on_position(done, total)`` as positions are ray-traced (not called on a cache hit)
     """
     from twin.radiation.cache import load_or_compute
 
-    table = load_or_compute(cfg, cache_dir=cache_dir, progress=progress, symmetric=symmetric)
+    table = load_or_compute(cfg, cache_dir=cache_dir, progress=progress, symmetric=symmetric,
+                            on_position=on_position)
     geo = furnace_geometry(cfg, 0.0)
     return RadiationModel(
         eta_nodes=table.eta,

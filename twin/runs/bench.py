@@ -11,7 +11,9 @@
 | closed_loop_speed_ratio | closed_loop_rtf / closed_loop_rtf_paper (target >= 0.8) |
 | ocp_s | feedforward OCP solve for a whole run |
 | replan_s | re-plan after a reference change, warm-started |
-| stream_* | dashboard stream figures (5 clients at real time; max speed with 2 clients) |
+| stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
+| stream_latency_p95_ms | p95 latency from sample to frame, while 2 runs go at speed max (backend.bench) |
+| rss_growth_mb | server memory growth over a 1 h run (simulated) at speed max; long_run_rtf: its speed |
 
 ``bench --hil [--duration S]`` measures hardware-in-the-loop timing instead (:mod:`twin.runs.bench_hil`).
 

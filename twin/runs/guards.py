@@ -9,7 +9,8 @@ checks every sample before its inputs reach the furnace and names the first thin
 * the estimated field lies within [``T_min``, ``T_max``]: nothing in the furnace is colder than its
   coldest surrounding (``twin.control.reference.coldest_surrounding``), nothing hotter than the top of
   the material tables the model holds, each widened by :data:`MARGIN_K` plus 10 noise sigmas;
-* the readings TC1..TC3 the estimator uses do not stay far from its estimate there: more than
+* the readings TC1..TC3 the estimator uses (not those the fault detection left out) do not stay far from
+  its estimate there: more than
   :data:`INNOVATION_K` (or 10 noise sigmas, if larger) for :data:`INNOVATION_SAMPLES` samples in a row.
 
 The loop (:class:`twin.runs.loop.ClosedLoop`) then switches the lamps off and raises
@@ -92,6 +93,11 @@ class DivergenceGuard:
                     f"{self._far} samples (now {innov[worst]:.0f} K): the estimate lost track")
         return None
 
-    def check(self, snap: Any) -> str | None:
-        """:meth:`problem` of a :class:`twin.runs.record.Snapshot`."""
-        return self.problem(field=snap.field_hat, T_mean=snap.T_mean_hat, tc=snap.tc, tc_hat=snap.tc_hat, u=snap.u)
+    def check(self, snap: Any, left_out: ArrayLike | None = None) -> str | None:
+        """:meth:`problem` of a :class:`twin.runs.record.Snapshot`; TCs in ``left_out`` (bool, TC1..3: the
+        fault detection found them faulty and the estimator does not use them) are not compared."""
+        tc = np.asarray(snap.tc, float)
+        if left_out is not None and np.any(left_out):
+            tc = tc.copy()
+            tc[:ESTIMATOR_TCS][np.asarray(left_out, bool)] = np.nan
+        return self.problem(field=snap.field_hat, T_mean=snap.T_mean_hat, tc=tc, tc_hat=snap.tc_hat, u=snap.u)

@@ -61,11 +61,12 @@ from numpy.typing import NDArray
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.control.plan import plain_status
-from twin.furnace.interface import Furnace, Readings
+from twin.furnace.interface import FaultInjectable, Furnace, Readings
 from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
 from twin.runs.estimators import RunEstimators
+from twin.runs.fault_ride_through import FaultRideThrough, faulty_model, reach_note
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
@@ -86,9 +87,11 @@ class _Plan:
     gains: Any
     oscillation: OscillationSpec
     parameters: Parameters  # the calibrated deviations the controller's model was built with
+    nominal: Any = None  # ``model`` without the lamp groups' faults (the fault detector's)
+    note: str = ""  # what the groups left can hold, when the plan models a lamp group's lost power
 
 
-class ClosedLoop:
+class ClosedLoop(FaultRideThrough):
     """A furnace + EKF + feedforward/LQG for one scenario.
 
     Parameters
@@ -116,6 +119,7 @@ class ClosedLoop:
         budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.lqg import Controller
+        from twin.estimation.fault_detection import FaultDetector
         from twin.model.tables import model_tables
         from twin.radiation import radiation_model
 
@@ -144,6 +148,8 @@ class ClosedLoop:
         # a change waiting for its plan: (spec, T_ref(t)) and the oscillation, in force when it is installed
         self._wanted_reference: tuple[Reference, Callable[[Any], Any]] | None = None
         self._wanted_oscillation: OscillationSpec | None = None
+        self._lamp_gains = np.ones(cfg.n_groups)  # believed fraction of each group's power (fault detection)
+        self._lamps_change = "lamp groups as the fault detection found them"  # its latest decision, for the event
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
@@ -163,6 +169,8 @@ class ClosedLoop:
         self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
+        self.detector = FaultDetector(cfg, self._ctl.nominal, n_parameters=self.estimator.k)
+        self._motion_for_detection(0.0)
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
@@ -176,7 +184,9 @@ class ClosedLoop:
             t_E=float(scenario.reference.t_E), setpoint=float(scenario.reference.setpoint),
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
-        self.record = RunRecord(header, has_truth=self._has_truth)
+        # fields at every sample through the metrics' windows (up to 2 t_E), then one per second (memory)
+        self.record = RunRecord(header, has_truth=self._has_truth, field_every=max(1, round(1.0 / self.t_s)),
+                                full_rate_until=2.0 * float(scenario.reference.t_E))
         self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
@@ -209,15 +219,23 @@ class ClosedLoop:
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
-        model = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
-                               parameters=parameters)
+        nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
+                                 parameters=parameters)
+        gains_now = self._lamp_gains.copy()
+        model = faulty_model(nominal, gains_now)  # the groups as the fault detection believes them
+        faulty = model is not nominal
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, t_stop=self.scenario.duration,
-                             budget=budget)
+                             budget=budget, best_effort=faulty)
         log.info(
             "plan from t = %.1f s: status %s, %s iterations, %.2f s",
             t0, plan.status, plan.iterations, plan.solve_s,
         )
-        return _Plan(model, plan, gains, spec, parameters)
+        note = ""
+        if faulty:
+            rest = np.append(np.arange(t0, self.n_steps * self.t_s, 1.0), self.n_steps * self.t_s)
+            T_end = float(np.max(np.asarray(ref_fn(rest), float)))  # the hottest the rest of the run asks for
+            note = reach_note(self.cfg, model, gains_now, T_end)
+        return _Plan(model, plan, gains, spec, parameters, nominal, note)
 
     # ------------------------------------------------------------------ live changes
     def set_reference(self, spec: Reference) -> Future[float]:
@@ -279,8 +297,10 @@ class ClosedLoop:
             how = f" ({describe(spec).removeprefix('on (')}" if spec.enabled else ""  # " (48 mm, 18 s)"
             said = {"reference": f"reference changed at t = {t:.1f} s{ref_words}",
                     "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}",
-                    "calibration": f"calibration at t = {t:.1f} s"}
-            self._install(ctl, "; ".join(said.get(k, k) for k in kinds))
+                    "calibration": f"calibration at t = {t:.1f} s",
+                    "lamps": f"{self._lamps_change} from t = {t:.1f} s"}
+            # a plan that models a lamp group's lost power: the integrator, which made up for it, starts at 0
+            self._install(ctl, "; ".join(said.get(k, k) for k in kinds), fresh_integrator="lamps" in kinds)
             return t
 
         def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
@@ -292,14 +312,21 @@ class ClosedLoop:
             raise future.exception()  # type: ignore[misc]
         return future
 
-    def _install(self, ctl: _Plan, description: str) -> None:
-        """Swap in a new plan at a sample boundary; the integrator state carries over."""
+    def _install(self, ctl: _Plan, description: str, fresh_integrator: bool = False) -> None:
+        """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
+        models what the integrator was making up for (a lamp group's lost power): then it starts at 0."""
         motion_changed = ctl.oscillation != self._ctl.oscillation
         self._ctl = ctl
         self.controller = self.controller.with_plan(ctl.plan, ctl.gains, ctl.model)
+        if fresh_integrator:
+            from twin.control.lqg import IntegratorState
+
+            self.controller.state = IntegratorState()
         if motion_changed:  # the averaged estimators switch to the new period average with the controller
             self.estimators.switch_motion(ctl.oscillation if ctl.oscillation.enabled else None)
-        self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}")
+            self.detector.set_model(ctl.nominal)
+        self._events.append(f"re-planned ({description}): {plain_status(ctl.plan.status)}"
+                            + (f"; {ctl.note}" if ctl.note else ""))
 
     # ------------------------------------------------------------------ the loop
     @property
@@ -328,9 +355,15 @@ class ClosedLoop:
             self._note_lateness(readings, t)
             self._events.extend(self.furnace.drain_events())
             eta = self.furnace.motion(t).eta
+            if isinstance(self.furnace, FaultInjectable):  # the furnace's own account, for the record only
+                self._events.extend(self.furnace.take_fault_events())
             c0 = time.perf_counter()
+            self._motion_for_detection(t)
+            y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)
+            theta_prior = self.estimator.state.theta.copy()
             holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
-            theta, shadow = self.estimators.update(readings.for_estimator(), learn=holding)  # eq. 13
+            theta, shadow = self.estimators.update(y, learn=holding)  # eq. 13 (faulty readings gated inside)
+            self._on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
             due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
             if due is not None:  # the controller's model follows the calibration (re-planned like a change)
                 self._request("calibration", due)
@@ -353,7 +386,7 @@ class ClosedLoop:
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
                 **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
-            problem = self._guard.check(snap)
+            problem = self._guard.check(snap, left_out=self.detector.excluded)
             if problem is not None:  # nothing of this sample reaches the furnace or the record
                 self.furnace.apply(np.zeros_like(snap.u), t)
                 raise EstimateDiverged(f"t = {t:.1f} s: {problem}; the lamps were switched off")
@@ -362,7 +395,9 @@ class ClosedLoop:
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            self.estimators.predict(snap.u, eta)
+            # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed)
+            self.estimators.predict(self._lamp_gains * snap.u, eta)
+            self.detector.predict(snap.u, theta, self.estimator.state.theta, self.estimator.parameter_jacobian)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap

@@ -6,8 +6,11 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
 * per sample (n,): ``t`` (s), ``eta`` (m), ``T_ref``, ``T_mean_hat`` (K), ``tc``, ``tc_hat`` (n, 4) K,
   ``u``, ``u_ff`` (n, 6) fractions of u_max; ``tc_status`` (n, 4) int8, :data:`TC_STATUS_CODES` of each
   reading (0 good, 1 bad, 2 missing: late or lost);
-* fields at ``t_field`` (here every sample): ``field_hat`` (m, N_y, N_x) K, and ``field_true``
-  only when the furnace is a simulation (a real furnace has no true field);
+* fields at ``t_field``: ``field_hat`` (m, N_y, N_x) K, and ``field_true`` only when the furnace is a
+  simulation (a real furnace has no true field).  Every sample up to ``full_rate_until`` (the loop: 2 t_E,
+  the end of the metrics' windows, moved by a live reference change), then every ``field_every``-th (the
+  loop: one per second, the least product.md allows), so a long run's memory grows by the scalars and
+  about 3.5 kB per second;
 * with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
   efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
   ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
@@ -86,7 +89,7 @@ class RunChange:
 
 def event_level(text: str) -> str:
     """The level of one of the loop's own reports: ``warn`` for a failure (a re-plan that failed), a late
-    sample or a lost link to the furnace, else ``info``.
+    sample, a lost link to the furnace or a fault the twin detected, else ``info``.
 
     >>> event_level("re-planning failed (reference not applied): no solution"), event_level("re-planned (x): ok")
     ('warn', 'info')
@@ -94,7 +97,16 @@ def event_level(text: str) -> str:
     'warn'
     >>> event_level("link to the furnace restored after 1.2 s")
     'info'
+
+    A fault the twin detected is a warning; a fault injected into the simulated furnace is information:
+
+    >>> event_level("fault detected: TC2 dropout at 4.1 s"), event_level("fault injected: T2h failed at t = 9.0 s")
+    ('warn', 'info')
     """
+    if text.startswith(("fault injected", "faults cleared")):
+        return "info"
+    if text.startswith("fault detected"):
+        return "warn"
     return "warn" if re.search(r"failed| late:|\blost\b", text) else "info"
 
 
@@ -229,10 +241,15 @@ class RunRecord:
     has_truth : the furnace reports a true field (a simulation); otherwise ``field_true`` is absent
     """
 
-    def __init__(self, header: RunHeader, *, has_truth: bool = True) -> None:
+    def __init__(self, header: RunHeader, *, has_truth: bool = True, field_every: int = 1,
+                 full_rate_until: float = np.inf) -> None:
         self.header = header
         self.has_truth = has_truth
+        self.field_every = max(1, int(field_every))
+        self.full_rate_until = float(full_rate_until)
         self._columns: dict[str, _Column] = {}
+        self._fields: dict[str, _Column] = {}  # t_field and the field series
+        self._since_field = 0
         self._optional: tuple[str, ...] = ()
         self._events: list[RunEvent] = []
         self._changes: list[RunChange] = []
@@ -244,29 +261,47 @@ class RunRecord:
         """Add one sample (its events too)."""
         values: dict[str, Any] = {k: getattr(snap, k) for k in SAMPLE_SERIES}
         values["tc_status"] = [TC_STATUS_CODES[st] for st in snap.tc_status] if snap.tc_status else [0] * len(snap.tc)
-        values["field_hat"] = snap.field_hat
-        if self.has_truth:
-            if snap.field_true is None:
-                raise ValueError("this record keeps a true field, the snapshot has none")
-            values["field_true"] = snap.field_true
+        if self.has_truth and snap.field_true is None:
+            raise ValueError("this record keeps a true field, the snapshot has none")
         if not self._columns:  # the first sample decides which optional series the run has
             self._optional = tuple(k for k in OPTIONAL_SERIES if getattr(snap, k) is not None)
         for k in self._optional:
             v = getattr(snap, k)
             if v is None:
                 raise ValueError(f"this record keeps {k}, the snapshot has none")
-            values[k] = v
+            if k not in FIELD_SERIES:  # the fields are kept below, thinned like the others
+                values[k] = v
         if not self._columns:
             for k, v in values.items():
-                dtype = np.float32 if k in FIELD_SERIES else (np.int8 if k == "tc_status" else float)
-                self._columns[k] = _Column(np.shape(v), dtype)
+                self._columns[k] = _Column(np.shape(v), np.int8 if k == "tc_status" else float)
         for k, v in values.items():
             self._columns[k].append(v)
+        self._since_field += 1
+        if float(snap.t) <= self.full_rate_until or self._since_field >= self.field_every or not self._fields:
+            self._since_field = 0
+            fields_now: dict[str, Any] = {"t_field": snap.t, "field_hat": snap.field_hat}
+            if self.has_truth:
+                fields_now["field_true"] = snap.field_true
+            for k in self._optional:
+                if k in FIELD_SERIES:  # a shadow estimator's field
+                    fields_now[k] = getattr(snap, k)
+            if not self._fields:
+                for k, v in fields_now.items():
+                    self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
+            for k, v in fields_now.items():
+                self._fields[k].append(v)
         self._events.extend(RunEvent(float(snap.t), str(e), event_level(str(e))) for e in snap.events)
 
     def note_change(self, t: float, kind: str, body_json: str) -> None:
-        """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``."""
-        self._changes.append(RunChange(float(t), kind, json.loads(body_json)))
+        """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``;
+        a reference change moves the metrics' windows, and the fields are kept at every sample through them."""
+        change = RunChange(float(t), kind, json.loads(body_json))
+        self._changes.append(change)
+        if kind == "reference" and np.isfinite(self.full_rate_until):
+            from twin.runs.metrics import windows_from
+
+            w = windows_from(self.header.t_E, self.header.setpoint, [(change.t, change.kind, change.body)])
+            self.full_rate_until = max(self.full_rate_until, w.steady[1])
 
     def arrays(self) -> dict[str, Any]:
         """Everything recorded so far, in the ``timeseries.npz`` layout (copies)."""
@@ -281,12 +316,13 @@ class RunRecord:
         for k in FIELD_SERIES:
             if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
-            col = self._columns.get(k)
+            col = self._fields.get(k)
             out[k] = col.view().copy() if col is not None else np.zeros((0, n_y, n_x), np.float32)
         for k in self._optional:
             if k not in FIELD_SERIES:
                 out[k] = self._columns[k].view().copy()
-        out["t_field"] = out["t"].copy()
+        t_field = self._fields.get("t_field")
+        out["t_field"] = t_field.view().copy() if t_field is not None else np.zeros(0)
         out.update(event_arrays(self._events))
         out.update(change_arrays(self._changes))
         return out
@@ -314,13 +350,19 @@ class RunRecord:
             out[k] = col.view()[start:].copy()
         for k in SAMPLE_SERIES:
             out.setdefault(k, np.zeros(0))
+        out.setdefault("tc_status", np.zeros((0, 4), np.int8))
+        t0 = float(out["t"][0]) if len(out["t"]) else np.inf
+        t_field = self._fields.get("t_field")
+        if t_field is not None:  # the fields kept from sample ``start`` on (a subsequence of the samples)
+            first = int(np.searchsorted(t_field.view(), t0 - 1e-9))
+            for k, col in self._fields.items():
+                out[k] = col.view()[first:].copy()
+        out.setdefault("t_field", np.zeros(0))
         for k in FIELD_SERIES:
             if (k == "field_true" and not self.has_truth) or (k in OPTIONAL_SERIES and k not in self._optional):
                 continue
             out.setdefault(k, np.zeros((0, n_y, n_x), np.float32))
-        out["t_field"] = out["t"].copy()
         if events_from is None:
-            t0 = float(out["t"][0]) if len(out["t"]) else np.inf
             events = [e for e in self._events if e.t >= t0]
         else:
             events = self._events[events_from:]

@@ -34,12 +34,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import Motion, Readings
+from twin.furnace.simulated.faults import FaultInjector
 from twin.furnace.simulated.plant import Plant
 from twin.furnace.simulated.sensors import LaggedThermocouples, LampLag
 from twin.furnace.simulated.thermocouples import Thermocouples
 from twin.furnace.simulated.truth import Truth, deviations
 from twin.physics.motion import eta_function
-from twin.scenario import Mismatch, OscillationSpec, Scenario
+from twin.scenario import FaultSpec, Mismatch, OscillationSpec, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +62,7 @@ class SimulatedFurnace:
     oscillation : the drive's settings at t = 0
     T0 : initial cell temperatures (K); default the configured uniform initial temperature
     truth : the furnace's latent heat, TC and lamp dynamics (``None``: the model's c_p, ideal TCs and lamps)
+    faults : faults injected at run time (:mod:`twin.furnace.simulated.faults`)
     """
 
     kind = "simulated"
@@ -78,6 +80,7 @@ class SimulatedFurnace:
         oscillation: OscillationSpec | None = None,
         T0: ArrayLike | None = None,
         truth: Truth | None = None,
+        faults: Sequence[FaultSpec] = (),
     ) -> None:
         self.cfg = cfg
         self.truth = truth
@@ -97,19 +100,20 @@ class SimulatedFurnace:
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
+        self.faults = FaultInjector(tuple(g.name for g in cfg.lamps.groups), faults)
         self._last_read: tuple[float, Readings] | None = None  # (plant time, readings): a repeated read of
         # the same sample gives the same readings
 
     @classmethod
     def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *,
                      truth_radiation: Any = None) -> SimulatedFurnace:
-        """The furnace of a scenario: its truth, mismatch, TC4, TC noise, seed and initial oscillation.
+        """The furnace of a scenario: its truth, mismatch, TC4, TC noise, seed, initial oscillation and faults.
 
         ``radiation`` is the twin's model (the plant's tables when the scenario's truth is ``"shared"``);
         ``truth_radiation`` the furnace's own table, read from the cache if not given and needed.
         """
         common: dict[str, Any] = {"tc4": scenario.tc4, "tc_noise": scenario.tc_noise, "seed": scenario.seed,
-                                  "oscillation": scenario.oscillation}
+                                  "oscillation": scenario.oscillation, "faults": scenario.faults}
         if scenario.truth == "shared":
             return cls(cfg, radiation, mismatch=scenario.mismatch, **common)
         truth = Truth.of(cfg, truth_radiation)
@@ -135,7 +139,7 @@ class SimulatedFurnace:
 
     def read(self, t: float) -> Readings:
         """TC1..TC4 at the plant's current time t: bilinear in the field (lagged and biased with a truth) plus
-        N(0, tc_noise^2) (section 3.2).
+        N(0, tc_noise^2) (section 3.2), as the injected faults leave them.
 
         Reading the same sample again returns the same readings (no new noise draw)."""
         self._check_time(t, "read")
@@ -147,21 +151,36 @@ class SimulatedFurnace:
             values = self._sensors.values()
             if self._tc_noise > 0.0:
                 values = values + self._tc_noise * self._rng.standard_normal(values.shape)
-        readings = Readings(values=values, timestamps=np.full(len(values), float(t)),
-                            status=tuple("good" for _ in values))
+        values, status = self.faults.readings(t, values)
+        readings = Readings(values=values, timestamps=np.full(len(values), float(t)), status=status)
         self._last_read = (self._state.t, readings)
         return readings
 
     def apply(self, u: Array, t: float) -> None:
-        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]).
+        """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]; a failed or
+        derated lamp group delivers less).
 
         With a truth the lamps radiate the lagged power (its mean over the sample, held by the plant)
         and the thermocouples follow the plate with their lag."""
         self._check_time(t, "apply")
-        power = u if self._lamps is None else self._lamps.step(u, self.t_s)
+        delivered = self.faults.delivered(t, u)  # a failed group's lamps go dark with their own lag
+        power = delivered if self._lamps is None else self._lamps.step(delivered, self.t_s)
         self._state = self.plant.advance(self._state, power, self.t_s, self._eta_of_t)
         if self._sensors is not None:
             self._sensors.advance(self._state.T, self.t_s)
+
+    # ---- fault injection (twin.furnace.interface.FaultInjectable)
+    def set_faults(self, faults: Sequence[FaultSpec], t: float) -> None:
+        """Replace the injected faults from run time t on (their ``at`` counted from t; empty clears them); a
+        reading of the current sample taken before is read again with them."""
+        self.faults.schedule(faults, t)
+        self._last_read = None
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        return self.faults.in_force()
+
+    def take_fault_events(self) -> list[str]:
+        return self.faults.take_events()
 
     def motion(self, t: float) -> Motion:
         return Motion(eta=float(self._eta_of_t(t)), oscillation=self._oscillation, since=self._since)

@@ -31,6 +31,7 @@ Example
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,11 +56,14 @@ def truth_radiation_config(cfg: FurnaceConfig) -> FurnaceConfig:
     })
 
 
-def truth_radiation(cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False) -> Any:
-    """The furnace's own radiation model (symmetric trace of :func:`truth_radiation_config`, cached)."""
+def truth_radiation(cfg: FurnaceConfig, *, cache_dir: str | Path | None = None, progress: bool = False,
+                    on_position: Callable[[int, int], None] | None = None) -> Any:
+    """The furnace's own radiation model (symmetric trace of :func:`truth_radiation_config`, cached);
+    ``on_position(done, total)`` follows a ray trace (a server's warm-up)."""
     from twin.radiation import radiation_model
 
-    return radiation_model(truth_radiation_config(cfg), cache_dir=cache_dir, progress=progress, symmetric=True)
+    return radiation_model(truth_radiation_config(cfg), cache_dir=cache_dir, progress=progress, symmetric=True,
+                           on_position=on_position)
 
 
 def precompute_truth(cfg: FurnaceConfig, force: bool = False) -> None:
