@@ -29,7 +29,7 @@ from backend.settings import Settings
 from twin.config import small_config
 from twin.furnace.opcua.options import OpcUaOptions
 from twin.runs.loop import ClosedLoop
-from twin.scenario import Scenario
+from twin.scenario import PAPER_ESTIMATOR, Scenario
 
 pytestmark = pytest.mark.realtime
 
@@ -67,16 +67,23 @@ def app(tmp_path, **opcua) -> TestClient:
     return TestClient(create_app(settings, CFG), base_url="http://127.0.0.1")
 
 
+# The paper's estimator for the comparison: what is compared is the transport.  The default estimator
+# calibrates in the 12 s hold, which amplifies the real-time path's small differences: in process, seeds
+# 4 / 5 / 6 end at 1.80 / 1.77 / 1.57 % steady mean error with it, 1.587 % / 1.614 % (seeds 4 / 5) with the
+# paper's, which the run over OPC UA met to 0.001 % (1.587 %) when it was the default.
+TRACK = {**BASE, "estimator": PAPER_ESTIMATOR.model_dump()}
+
+
 def test_closed_loop_over_opcua_tracks_like_in_process(tmp_path, small_radiation) -> None:
-    in_process = ClosedLoop(CFG, Scenario.model_validate(BASE), small_radiation)
+    in_process = ClosedLoop(CFG, Scenario.model_validate(TRACK), small_radiation)
     list(in_process.run())
     reference = in_process.metrics()
 
     # the emulated furnace: same seed and TC noise, its specimen at 300 K until the twin starts (as in process)
-    (tmp_path / "plant.json").write_text(json.dumps(BASE))
+    (tmp_path / "plant.json").write_text(json.dumps(TRACK))
     with emulator_process(tmp_path, "--scenario", str(tmp_path / "plant.json"), "--load-on-first-client") as emu, \
             app(tmp_path) as c:
-        r = c.post("/api/runs", json={**BASE, "plant": {"kind": "opcua", "endpoint": emu.url}})
+        r = c.post("/api/runs", json={**TRACK, "plant": {"kind": "opcua", "endpoint": emu.url}})
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
         body = wait_status(c, run_id, {"finished", "error", "plant_lost"}, timeout=180)
