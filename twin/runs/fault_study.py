@@ -15,6 +15,7 @@ noise seeds and with the fault-free run of the same seed beside it.  Per case an
 Example (one short case; the default is the whole table)::
 
     python -m twin.runs.fault_study --seeds 3 --json out/faults.json
+    python -m twin.runs.fault_study --seeds 3 --estimator paper --json out/faults_paper.json
 """
 
 from __future__ import annotations
@@ -121,13 +122,21 @@ def study(cfg: FurnaceConfig, *, seeds: int = 3, at: float = 150.0, oscillation:
             rows.append(row)
             log.info("%s seed %d: %s (%.0f s)", name, seed, {k: row[k] for k in ("detected_after_s", "kind",
                      "false", "tc4_after", "tc4_after_ok")}, time.perf_counter() - t0)
-    return {"oscillation": oscillation, "at": at, "seeds": seeds, "truth": Scenario.model_validate(base).truth,
-            "rows": rows}
+    scenario = Scenario.model_validate(base)
+    return {"oscillation": oscillation, "at": at, "seeds": seeds, "truth": scenario.truth,
+            "estimator": scenario.estimator.model_dump(), "rows": rows}
 
 
 def _k(metrics: dict[str, Any], key: str, setpoint: float) -> float | None:
     v = metrics.get(key)
     return None if v is None else round(float(v) * setpoint, 2)
+
+
+def _estimator(name: str) -> dict[str, Any]:
+    """The scenario's ``estimator`` for ``--estimator``: the default's is the scenario's own."""
+    from twin.scenario import PAPER_ESTIMATOR
+
+    return {"estimator": PAPER_ESTIMATOR.model_dump()} if name == "paper" else {}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,6 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", default=None)
     p.add_argument("--truth", choices=("independent", "shared"), default="independent",
                    help="the simulated furnace's own truth (default) or the model's plant")
+    p.add_argument("--estimator", choices=("default", "paper"), default="default",
+                   help="the twin's default estimator or the paper's (averaged model, no calibration)")
     p.add_argument("--json", default=None, help="write the table here")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
@@ -146,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger(noisy).setLevel(logging.ERROR)
     cases = tuple(c for c in CASES if not args.case or c[0] in args.case)
     out = study(load_config(args.config), seeds=args.seeds, at=args.at, oscillation=args.oscillate, cases=cases,
-                base={"truth": args.truth})
+                base={"truth": args.truth, **_estimator(args.estimator)})
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
