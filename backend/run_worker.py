@@ -42,7 +42,7 @@ from backend.storage import DataDir
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.physics.fillet import Fillet
-from twin.runs.record import RunEvent, event_arrays, event_level
+from twin.runs.events import RunEvent, event_arrays, event_level
 from twin.runs.replanning import Superseded
 from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
