@@ -31,6 +31,7 @@ from backend.fanout import StreamHub
 from backend.frames import SnapshotLike, frame_extra, frame_json
 from backend.loop_factory import DefaultLoopFactory
 from backend.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow, clean_label
+from backend.run_changes import ChangeRejected
 from backend.run_checks import RunChecks
 from backend.run_files import RunFiles, write_json_atomic
 from backend.run_types import (  # noqa: F401  (re-exported: the routes and the UIs import them from here)
@@ -47,7 +48,7 @@ from backend.run_types import (  # noqa: F401  (re-exported: the routes and the 
     TooManyRuns,
     in_force,
 )
-from backend.run_worker import ChangeRejected, LoopFactory, RunWorker
+from backend.run_worker import LoopFactory, RunWorker
 from backend.settings import Settings
 from backend.start_requests import RequestReused, StartRequests
 from backend.storage import DataDir, run_bytes
