@@ -1,4 +1,4 @@
-"""The feedforward plan's bookkeeping (twin.control.plan) and the OCP's time scales (twin.control.feedforward).
+"""The feedforward plan's bookkeeping (twin.control.plan) and the OCP's time scales (twin.control.ocp_grid).
 
 Every expected number below is worked by hand from the definitions in the docstrings; no IPOPT
 solve is needed (tests/control/test_feedforward.py covers the OCP itself).
