@@ -27,6 +27,7 @@ from backend.errors import validation_error
 from backend.recovery import recover_interrupted
 from backend.repository import RunRepository
 from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
+from backend.run_changes import ChangeCancelled, ChangeRejected
 from backend.run_manager import (
     InsufficientStorage,
     LimitExceeded,
@@ -38,7 +39,7 @@ from backend.run_manager import (
     RunNotFound,
     TooManyRuns,
 )
-from backend.run_worker import ChangeCancelled, ChangeRejected, LoopFactory
+from backend.run_worker import LoopFactory
 from backend.security import SecurityMiddleware
 from backend.settings import Settings
 from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner

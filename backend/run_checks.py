@@ -12,8 +12,9 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.messages import field_path, plain_message
+from backend.run_changes import ChangeRejected
 from backend.run_types import LimitExceeded
-from backend.run_worker import ChangeRejected, LoopFactory
+from backend.run_worker import LoopFactory
 from backend.settings import Settings
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget

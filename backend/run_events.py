@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import deque
 
 from twin.control.saturation import SaturationWatch
-from twin.runs.record import RunEvent
+from twin.runs.events import RunEvent
 
 #: what a run's own end is called in its events
 END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",

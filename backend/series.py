@@ -33,8 +33,9 @@ from backend.frames import json_safe
 from twin.control.saturation import bound_flags
 from twin.model.tables import PARAMETERS
 from twin.physics.fillet import Fillet
+from twin.runs.events import load_changes, load_events
 from twin.runs.metrics import windows_of
-from twin.runs.record import load_arrays, load_changes, load_events
+from twin.runs.record import load_arrays
 from twin.runs.series_store import has_parts, load_parts
 
 SCALARS = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")

@@ -27,9 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 EQUIVALENT_FILE = ROOT / "scripts" / "mutation_equivalent.toml"
 
 #: module -> None (every function) or the functions in scope.  Out of scope: the IPOPT set-up of
-#: the feedforward OCP (_solve_feedforward, solve_feedforward, _ipopt_options: each mutant is a
-#: 40 s OCP solve, tested by tests/control/test_feedforward.py, and issue 15 rewrites it) and the
-#: benchmark helpers (ocp_seconds, ekf_step_ms: timing loops, judged by `furnace-twin bench`).
+#: the feedforward OCP (twin.control.feedforward: _solve_feedforward, solve_feedforward, _ipopt_options:
+#: each mutant is a 40 s OCP solve, tested by tests/control/test_feedforward.py, and issue 15 rewrites
+#: it) and the benchmark helpers (ocp_seconds, ekf_step_ms: timing loops, judged by `furnace-twin bench`).
+#: The OCP grid's scanned functions moved from twin.control.feedforward to twin.control.ocp_grid (issue 9).
 SCOPE: dict[str, list[str] | None] = {
     "twin.runs.metrics": None,
     "twin.estimation.ekf": ["x_process_noise", "x_propagate_covariance", "x_ekf_predict", "x__gain", "x_ekf_update",
@@ -37,7 +38,7 @@ SCOPE: dict[str, list[str] | None] = {
     "twin.control.reference": None,
     "twin.control.lqg": None,
     "twin.control.plan": None,
-    "twin.control.feedforward": ["x_transition_end", "x_mean_time_constant", "x__fastest_rate"],
+    "twin.control.ocp_grid": ["x_transition_end", "x_mean_time_constant", "x__fastest_rate"],
     "twin.model.averaging": None,
     "twin.physics.motion": None,
     "twin.physics.fillet": None,
@@ -50,7 +51,7 @@ SCOPE: dict[str, list[str] | None] = {
 #: modules other work will rewrite: their survivors (and equivalence notes) need a fresh look then
 LIKELY_TO_CHANGE = {
     "twin.estimation.ekf": "issue 11 (self-calibrating, position-aware estimator)",
-    "twin.control.feedforward": "issue 15 (bounded planning horizons)",
+    "twin.control.ocp_grid": "issue 15 (bounded planning horizons)",
     "twin.control.plan": "issue 15 (bounded planning horizons)",
     "twin.control.lqg": "issue 15 (gains along bounded horizons)",
 }

@@ -4,7 +4,7 @@ from twin.config import load_config, small_config
 from twin.radiation import radiation_model
 from twin.model.discrete import discrete_model
 from twin.control.reference import reference_trajectory
-from twin.control.feedforward import plan_grid
+from twin.control.ocp_grid import plan_grid
 from twin.scenario import TransitionReference
 for name, cfg in (("default", load_config()), ("small", small_config())):
     model = discrete_model(cfg, radiation_model(cfg), None)

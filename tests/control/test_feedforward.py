@@ -7,8 +7,9 @@ import pytest
 from controller_standin import make_standin
 
 from twin.config import small_config
-from twin.control.feedforward import solve_feedforward, transition_end
+from twin.control.feedforward import solve_feedforward
 from twin.control.initial_guess import heating_efficiency
+from twin.control.ocp_grid import transition_end
 from twin.control.plan import FeedforwardError, simulate
 from twin.control.reference import reference_trajectory
 from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution, smooth_min1
@@ -188,7 +189,7 @@ def test_transition_end_of_plain_callables():
 
 
 def test_default_horizon_is_beta_t_E_or_the_settling_time(model, cfg):
-    from twin.control.feedforward import SETTLE_TIME_CONSTANTS, mean_time_constant
+    from twin.control.ocp_grid import SETTLE_TIME_CONSTANTS, mean_time_constant
 
     ref = reference_trajectory(TransitionReference(setpoint=1100.0, t_E=120.0), T0)
     tau = mean_time_constant(model, np.full(model.n, 1100.0), np.full(model.m, 0.5))

@@ -1,4 +1,4 @@
-"""The feedforward plan's bookkeeping (twin.control.plan) and the OCP's time scales (twin.control.feedforward).
+"""The feedforward plan's bookkeeping (twin.control.plan) and the OCP's time scales (twin.control.ocp_grid).
 
 Every expected number below is worked by hand from the definitions in the docstrings; no IPOPT
 solve is needed (tests/control/test_feedforward.py covers the OCP itself).
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from twin.control.feedforward import _fastest_rate, mean_time_constant
+from twin.control.ocp_grid import _fastest_rate, mean_time_constant
 from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
 
 
@@ -129,7 +129,7 @@ def test_fastest_rate_is_the_spectral_radius_of_the_continuous_jacobian() -> Non
 
 
 def test_transition_end_prefers_the_references_own_end() -> None:
-    from twin.control.feedforward import transition_end
+    from twin.control.ocp_grid import transition_end
     from twin.control.reference import reference_trajectory
     from twin.scenario import TransitionReference
 
@@ -138,7 +138,7 @@ def test_transition_end_prefers_the_references_own_end() -> None:
 
 
 def test_transition_end_of_a_callable_is_the_first_sample_after_it_stops_moving() -> None:
-    from twin.control.feedforward import MAX_REFERENCE_S, transition_end
+    from twin.control.ocp_grid import MAX_REFERENCE_S, transition_end
 
     # a ramp from t0 = 2 s that stops at 2.55 s: moving at 2.0 .. 2.5 s, constant from 2.6 s on (0.1 s grid)
     assert transition_end(lambda t: np.minimum(np.asarray(t) - 2.0, 0.55), 2.0, 0.1) == pytest.approx(2.6)

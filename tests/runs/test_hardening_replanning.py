@@ -16,7 +16,8 @@ import pytest
 
 from twin.config import small_config
 from twin.control.budget import PlanBudget, PlanCancelled, PlanTooLarge
-from twin.control.feedforward import MAX_KNOTS, plan_grid, solve_feedforward
+from twin.control.feedforward import solve_feedforward
+from twin.control.ocp_grid import MAX_KNOTS, plan_grid
 from twin.control.reference import reference_trajectory
 from twin.model.discrete import discrete_model
 from twin.runs.loop import ClosedLoop

@@ -180,8 +180,8 @@ def test_live_reference_and_oscillation_changes(small_radiation, plans):
     assert loop.estimator is not None
     # the record keeps both changes (from the first sample that uses each) and the windows move to the
     # reference change: transient 5..15 s, steady 20..25 s, errors relative to 900 K
+    from twin.runs.events import load_changes
     from twin.runs.metrics import windows_of
-    from twin.runs.record import load_changes
 
     a = loop.record.arrays()
     changes = load_changes(a)
@@ -224,16 +224,8 @@ def test_unreachable_reference_is_refused_and_changes_nothing(small_radiation, p
 
 def test_the_record_keeps_events_and_changes_through_save_and_load(tmp_path):
     """timeseries.npz holds the events with their levels and the live changes; older files without them load."""
-    from twin.runs.record import (
-        RunChange,
-        RunEvent,
-        change_arrays,
-        event_arrays,
-        load_arrays,
-        load_changes,
-        load_events,
-        save_arrays,
-    )
+    from twin.runs.events import RunChange, RunEvent, change_arrays, event_arrays, load_changes, load_events
+    from twin.runs.record import load_arrays, save_arrays
 
     events = [RunEvent(0.0, "run started"), RunEvent(12.5, "T2v at full power", "warn")]
     changes = [RunChange(10.1, "reference", {"points": [[1.0, 900.0]]})]

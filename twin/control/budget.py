@@ -85,7 +85,7 @@ class PlanEstimate:
 
     The time comes from the real code on this machine now (so it follows its load): ``sweep_s`` is one
     sweep of this very OCP (cost, gradient and Hessian over the whole horizon: :meth:`twin.control.
-    feedforward.PlanGrid.estimate` with ``timed=True``), ``jacobian_s`` a Jacobian pair of the model and
+    ocp_grid.PlanGrid.estimate` with ``timed=True``), ``jacobian_s`` a Jacobian pair of the model and
     ``riccati_s`` one step of the gains' recursion.  ``None`` until measured.
     """
 

@@ -21,7 +21,8 @@ over the horizon beta t_E.  Choices made to keep it small, smooth and fast:
   sensitivities, checked against an adjoint) and a Hessian: Gauss-Newton plus the
   exact curvature of the input map (saturation, product v d).  IPOPT gets them
   through CasADi callbacks (options ``grad_f``, ``hess_lag``).  Without the input
-  curvature IPOPT needed hundreds of iterations; with it about 20-35.
+  curvature IPOPT needed hundreds of iterations; with it about 20-35.  The grid (horizon,
+  knots, Heun substeps) comes from :mod:`twin.control.ocp_grid`.
 * **Fine-grid plan.**  u_ff,j = sat(v_j u_c) with the exact sat of eq. (18) at every
   sample, theta_ref = the fine model (12a) driven by u_ff, T_mean = c_m^T theta_ref,
   and ``plan.max_mean_error`` = max_j |T_mean,j - T_ref,j| measures what the coarse
@@ -60,21 +61,18 @@ Example
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
-from twin.control.budget import PlanBudget, PlanEstimate
+from twin.control.budget import PlanBudget
 from twin.control.initial_guess import V_MAX, KnotGrid, free_guess, heating_efficiency, knot_weights, parametrized_guess
 from twin.control.ipopt_callbacks import casadi_objective
+from twin.control.ocp_grid import DEFAULT_INTERVAL_S, RefFn, check_budget, plan_grid
 from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
 from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution
 from twin.model.dynamics import DiscreteDynamics
@@ -82,25 +80,11 @@ from twin.model.dynamics import DiscreteDynamics
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
-RefFn = Callable[[Any], Any]
 
-#: Width of the v-knot grid of the OCP (s).  A numerical choice, not a furnace parameter.
-DEFAULT_INTERVAL_S = 1.0
-#: Largest h |lambda_max| of the Heun substeps (stability limit of Heun on the real axis is 2).
-HEUN_STEP_LIMIT = 1.0
 #: rho of the Tikhonov term rho * mean_k(v_k^2) (K^2) added to (20a): far below one K^2 of
 #: tracking error, it only removes the flat directions of v where every used group saturates
 #: (there the cost does not depend on v and the Gauss-Newton Hessian is singular).
 INPUT_REGULARIZATION = 1e-3
-#: Shortest OCP horizon in fillet-mean time constants (a re-plan at or after the end of a
-#: transition still needs the settling; 2 tau = 86 % settled, a compromise with the re-plan time).
-SETTLE_TIME_CONSTANTS = 2.0
-#: Longest reference the horizon search looks at (s): scenario.MAX_DURATION_S.
-MAX_REFERENCE_S = 3600.0
-#: Most v-knots of one OCP.  The sweep's residual Jacobian and Hessian grow with K^2 (memory and
-#: time); a longer horizon holds v over proportionally longer intervals (a multiple of t_s) instead.
-#: 240 keeps the paper's run (beta t_E = 144 s) and transitions up to 200 s at the 1 s knots.
-MAX_KNOTS = 240
 
 
 # --------------------------------------------------------------------------- helpers
@@ -108,127 +92,6 @@ def _ca() -> Any:
     import casadi
 
     return casadi
-
-
-def transition_end(ref: RefFn, t0: float, t_s: float) -> float:
-    """Run time (s) from which T_ref is constant: ``ref.t_end`` if it has one, else found by scanning."""
-    t_end = getattr(ref, "t_end", None)
-    if t_end is not None:
-        return float(t_end)
-    t = t0 + np.arange(0.0, MAX_REFERENCE_S + t_s, t_s)
-    T = np.asarray(ref(t), float)
-    moving = np.nonzero(np.abs(T - T[-1]) > 1e-9 * max(1.0, abs(float(T[-1]))))[0]
-    return float(t[moving[-1] + 1]) if moving.size else float(t0)
-
-
-def mean_time_constant(model: DiscreteDynamics, theta: ArrayLike, u: ArrayLike) -> float:
-    """tau (s) of the fillet mean: 1 / (-c_m^T J 1), J = (dF/dtheta - I) / t_s (eqs. 12a, 16, 19).
-
-    -c_m^T J 1 is the rate (1/s) at which the fillet mean relaxes after a uniform
-    temperature rise of the specimen, i.e. its net loss coefficient.
-    """
-    J = (np.asarray(model.jac_theta(np.asarray(theta, float), np.asarray(u, float)), float)
-         - np.eye(model.n)) / model.t_s
-    rate = -float(np.asarray(model.c_m, float) @ J @ np.ones(model.n))
-    return 1.0 / max(rate, 1e-6)
-
-
-def _fastest_rate(model: DiscreteDynamics, theta: Array, u: Array) -> float:
-    J = (np.asarray(model.jac_theta(theta, u), float) - np.eye(model.n)) / model.t_s
-    return float(np.max(np.abs(np.linalg.eigvals(J))))
-
-
-@dataclass(frozen=True)
-class PlanGrid:
-    """Where and how finely a plan is made: horizon, knot interval and count, Heun substeps per knot."""
-
-    t0: float
-    horizon: float
-    interval: float  # s, a multiple of t_s
-    K: int
-    n_heun: int
-    t_end: float  # end of the reference's transition (s)
-    T_final: float  # K
-    T_hot: float  # hottest temperature planned for (K)
-
-    def estimate(self, model: DiscreteDynamics, cfg: FurnaceConfig | None = None, *,
-                 timed: bool = False, check: Callable[[], None] | None = None) -> PlanEstimate:
-        """Size of the plan on this grid (:class:`twin.control.budget.PlanEstimate`); with ``timed=True``
-        (needs ``cfg``) also its typical cost: one sweep of this OCP is run and timed (it allocates the
-        arrays :attr:`PlanEstimate.memory_mb` counts: check that first), and a Jacobian pair and a Riccati step."""
-        substeps = max(1, int(round(self.interval / model.t_s)))
-        est = PlanEstimate(horizon_s=self.horizon, knots=self.K, substeps=self.K * self.n_heun,
-                           samples=self.K * substeps, n=model.n, m=model.m)
-        if not timed:
-            return est
-        assert cfg is not None
-        th, u = np.full(model.n, self.T_final), np.full(model.m, 0.5)
-        grid = KnotGrid(self.t0, model.t_s, substeps, self.K)
-        inputs = ScaledDistribution(model.m, self.K, cfg.feedforward.smoothing)
-        shooting = CoarseShooting(model, th, grid.dt, self.n_heun, np.full(self.K + 1, self.T_final),
-                                  knot_weights(grid), cfg.feedforward.g0, cfg.feedforward.g1, inputs,
-                                  check=check)
-        p = np.concatenate([np.full(model.m, 1.0 / model.m), np.full(self.K, 0.5)])
-        sweep_s = _seconds(lambda: shooting.sweep(p), repeat=1)
-        jac_s = _seconds(lambda: (model.jac_theta(th, u), model.jac_u(th, u)))
-        from twin.control.lqg import riccati_step
-
-        n1 = model.n + 1
-        P, Phi, Gam, Q = np.eye(n1), np.eye(n1), np.ones((n1, model.m)), np.eye(n1)
-        riccati_s = _seconds(lambda: riccati_step(P, Phi, Gam, Q, 1.0))
-        return dataclasses.replace(est, sweep_s=sweep_s, jacobian_s=jac_s, riccati_s=riccati_s)
-
-
-def _seconds(f: Callable[[], Any], repeat: int = 5) -> float:
-    """Median of ``repeat`` wall times of ``f()`` (s): the machine's speed now, load included."""
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
-
-
-def check_budget(grid: PlanGrid, model: DiscreteDynamics, cfg: FurnaceConfig, budget: PlanBudget) -> PlanEstimate:
-    """Raise :class:`twin.control.budget.PlanTooLarge` if the plan on ``grid`` needs more memory than
-    ``budget`` allows, or (then timed: one sweep) more time; returns the timed estimate."""
-    budget.refuse_if_too_large(grid.estimate(model))
-    est = grid.estimate(model, cfg, timed=True, check=budget.check_cancel)  # the estimate's time is not the plan's
-    budget.refuse_if_too_large(est)
-    return est
-
-
-def plan_grid(model: DiscreteDynamics, T_ref_fn: RefFn, t0: float, cfg: FurnaceConfig, *,
-              horizon: float | None = None, t_stop: float | None = None,
-              interval: float = DEFAULT_INTERVAL_S, theta0: ArrayLike | None = None) -> PlanGrid:
-    """The grid of the OCP from run time ``t0`` (no solving).
-
-    Horizon: ``horizon`` if given, else beta (transition end - t0) (section 4.1), at least
-    :data:`SETTLE_TIME_CONSTANTS` fillet-mean time constants at the final temperature; never beyond
-    the run's end ``t_stop`` by more than one knot interval (the plan must cover the last sample; nothing
-    after the run is worth computing).  Knots every ``interval`` s, or coarser so that there are at most
-    :data:`MAX_KNOTS`.
-    """
-    t_s = model.t_s
-    t_end = transition_end(T_ref_fn, t0, t_s)
-    T_final = float(np.asarray(T_ref_fn(np.array([t_end])), float)[0])
-    if horizon is None:
-        theta_lin = np.full(model.n, T_final)
-        horizon = max(cfg.feedforward.beta * (t_end - t0),
-                      SETTLE_TIME_CONSTANTS * mean_time_constant(model, theta_lin, np.full(model.m, 0.5)))
-    substeps = max(1, int(round(interval / t_s)))
-    if t_stop is not None:
-        horizon = min(horizon, max(t_stop - t0, 0.0) + substeps * t_s)
-    substeps = max(substeps, int(math.ceil(horizon / (MAX_KNOTS * t_s) - 1e-9)))
-    K = max(2, int(math.ceil(horizon / (substeps * t_s) - 1e-9)))
-    t_knots = t0 + np.arange(K + 1) * substeps * t_s
-    hot = [T_final, float(np.max(np.asarray(T_ref_fn(t_knots), float)))]
-    if theta0 is not None:
-        hot.append(float(np.max(np.asarray(theta0, float))))
-    T_hot = max(hot)
-    lam = _fastest_rate(model, np.full(model.n, T_hot), np.full(model.m, 0.5))
-    n_heun = max(1, int(math.ceil(substeps * t_s * lam / HEUN_STEP_LIMIT)))
-    return PlanGrid(float(t0), float(horizon), substeps * t_s, K, n_heun, t_end, T_final, T_hot)
 
 
 # --------------------------------------------------------------------------- the NLP
@@ -299,11 +162,11 @@ def solve_feedforward(
     horizon : float, optional
         OCP horizon (s); default beta * (transition end - t0) (section 4.1), at least
         2 time constants of the fillet mean at the final temperature
-        (:func:`mean_time_constant`) so a late re-plan still covers the settling
-        (:func:`plan_grid`).
+        (:func:`twin.control.ocp_grid.mean_time_constant`) so a late re-plan still covers the settling
+        (:func:`twin.control.ocp_grid.plan_grid`).
     interval : float
         Knot spacing of v (s), a multiple of t_s; coarser when the horizon needs more than
-        :data:`MAX_KNOTS` knots.
+        :data:`twin.control.ocp_grid.MAX_KNOTS` knots.
     best_effort : bool
         Return the last iterate (``success=False``) instead of raising when IPOPT fails.
     max_iter, max_wall_s : int, float

@@ -37,8 +37,9 @@ from numpy.typing import ArrayLike
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanEstimate
-from twin.control.feedforward import RefFn, check_budget, plan_grid, solve_feedforward
+from twin.control.feedforward import solve_feedforward
 from twin.control.lqg import Gains, lqg_gains
+from twin.control.ocp_grid import RefFn, check_budget, plan_grid
 from twin.control.plan import FeedforwardPlan
 
 log = logging.getLogger(__name__)
@@ -89,7 +90,7 @@ def replan(
         OCP horizon (s); default as in :func:`twin.control.feedforward.solve_feedforward`.
     t_stop : float, optional
         Run time (s) at which the run ends: nothing is planned much beyond it
-        (:func:`twin.control.feedforward.plan_grid`).
+        (:func:`twin.control.ocp_grid.plan_grid`).
     budget : PlanBudget, optional
         Wall time, memory and cancellation of this job (:mod:`twin.control.budget`).
 

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from twin.model.tables import PARAMETERS  # the order of the record's ``parameters``
 from twin.physics.fillet import Fillet
-from twin.runs.record import load_changes
+from twin.runs.events import load_changes
 
 Array = NDArray[np.float64]
 

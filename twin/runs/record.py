@@ -18,16 +18,19 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   run's own reports (re-plans, switches; the server adds its own: start, end, changes, saturation);
 * live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
   (``reference`` or ``oscillation``) and ``change_json`` (the new reference / oscillation as JSON); the
-  metrics' windows start at the last reference change (:func:`twin.runs.metrics.windows_of`);
+  metrics' windows start at the last reference change (:func:`twin.runs.metrics.windows_of`); these and
+  the events are :class:`twin.runs.events.RunEvent` and :class:`twin.runs.events.RunChange`;
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
 
-This module is the only place that names these keys; the loop, the metrics, the figures, the
-backend's flushes and recovery and the 3D view read and write runs through it.
+This module (with :mod:`twin.runs.events` for the events' and changes' keys) is the only place that
+names these keys; the loop, the metrics, the figures, the backend's flushes and recovery and the 3D view
+read and write runs through it.
 
 Example
 -------
 >>> import numpy as np
+>>> from twin.runs.events import load_changes
 >>> rec = RunRecord(RunHeader(x=np.arange(3.0), y=np.arange(2.0), tc_positions=np.zeros((4, 2)), L_s=3.0,
 ...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"),
 ...                 has_truth=False)   # e.g. a real furnace
@@ -46,14 +49,15 @@ from __future__ import annotations
 
 import json
 import os
-import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from twin.runs.events import RunChange, RunEvent, change_arrays, event_arrays, event_level
 
 Array = NDArray[np.float64]
 
@@ -65,83 +69,6 @@ FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
 OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
 #: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
 TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
-EVENT_LEVELS = ("info", "warn", "error")
-
-
-@dataclass(frozen=True)
-class RunEvent:
-    """One report of a run: at run time ``t`` (s), a plain sentence, ``info``, ``warn`` or ``error``."""
-
-    t: float
-    text: str
-    level: str = "info"
-
-
-@dataclass(frozen=True)
-class RunChange:
-    """A live change applied during a run: from run time ``t`` (s) on, ``kind`` (``reference`` or
-    ``oscillation``) is ``body`` (the reference / oscillation as a JSON object)."""
-
-    t: float
-    kind: str
-    body: dict[str, Any]
-
-
-def event_level(text: str) -> str:
-    """The level of one of the loop's own reports: ``warn`` for a failure (a re-plan that failed), a late
-    sample, a lost link to the furnace or a fault the twin detected, else ``info``.
-
-    >>> event_level("re-planning failed (reference not applied): no solution"), event_level("re-planned (x): ok")
-    ('warn', 'info')
-    >>> event_level("sample at t = 3.0 s late: no TC1 in time (the EKF predicts without them)")
-    'warn'
-    >>> event_level("link to the furnace restored after 1.2 s")
-    'info'
-
-    A fault the twin detected is a warning; a fault injected into the simulated furnace is information:
-
-    >>> event_level("fault detected: TC2 dropout at 4.1 s"), event_level("fault injected: T2h failed at t = 9.0 s")
-    ('warn', 'info')
-    """
-    if text.startswith(("fault injected", "faults cleared")):
-        return "info"
-    if text.startswith("fault detected"):
-        return "warn"
-    return "warn" if re.search(r"failed| late:|\blost\b", text) else "info"
-
-
-def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:
-    """Events as the ``event_t``, ``event_text``, ``event_level`` arrays of the ``timeseries.npz`` layout."""
-    ev = list(events)
-    return {"event_t": np.asarray([e.t for e in ev], float),
-            "event_text": np.asarray([e.text for e in ev], dtype=str),
-            "event_level": np.asarray([e.level for e in ev], dtype=str)}
-
-
-def load_events(arrays: Mapping[str, Any]) -> list[RunEvent]:
-    """The events of a saved run (an older file without ``event_*`` has none; without levels: ``info``)."""
-    if "event_t" not in arrays:
-        return []
-    ts, texts = np.asarray(arrays["event_t"], float), np.asarray(arrays["event_text"]).astype(str)
-    levels = np.asarray(arrays["event_level"]).astype(str) if "event_level" in arrays else ["info"] * len(ts)
-    return [RunEvent(float(t), str(x), str(lv)) for t, x, lv in zip(ts, texts, levels, strict=True)]
-
-
-def change_arrays(changes: Iterable[RunChange]) -> dict[str, Any]:
-    """Live changes as the ``change_t``, ``change_kind``, ``change_json`` arrays of ``timeseries.npz``."""
-    ch = list(changes)
-    return {"change_t": np.asarray([c.t for c in ch], float),
-            "change_kind": np.asarray([c.kind for c in ch], dtype=str),
-            "change_json": np.asarray([json.dumps(c.body, sort_keys=True) for c in ch], dtype=str)}
-
-
-def load_changes(arrays: Mapping[str, Any]) -> list[RunChange]:
-    """The live changes of a saved run, oldest first (none in an older file)."""
-    if "change_t" not in arrays:
-        return []
-    return [RunChange(float(t), str(k), json.loads(str(b))) for t, k, b in
-            zip(np.asarray(arrays["change_t"], float), np.asarray(arrays["change_kind"]).astype(str),
-                np.asarray(arrays["change_json"]).astype(str), strict=True)]
 
 
 @dataclass(frozen=True)

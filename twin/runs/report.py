@@ -37,8 +37,8 @@ from matplotlib.patches import Rectangle
 from matplotlib.transforms import Bbox
 
 from twin.physics.fillet import FILLET_X, FILLET_Y, Fillet
+from twin.runs.events import load_events
 from twin.runs.metrics import METRIC_KEYS, METRIC_WORDS, Windows, late_samples, windows_of
-from twin.runs.record import load_events
 
 TC_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 GROUP_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b")
