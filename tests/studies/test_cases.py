@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -159,3 +161,15 @@ def test_study_file_toml(tmp_path):
         load_study(f)
     with pytest.raises(StudyError, match="cannot read"):
         load_study(tmp_path / "missing.toml")
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[2] / "studies").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_study_expands_against_its_furnace(path):
+    """The study files in studies/ (the README's examples and the speed study) load and expand: every field
+    path exists and every value is within the limits of the furnace the file names."""
+    from twin.config import load_config
+
+    spec = load_study(path)
+    cases = expand(spec, load_config(spec.furnace))
+    n_grid = int(np.prod([len(v) for v in spec.grid.values()])) if spec.grid else 1
+    assert len(cases) == n_grid * (spec.monte_carlo.n if spec.monte_carlo else 1)
