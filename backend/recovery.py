@@ -33,7 +33,7 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
             log.warning("run %s: its recording could not be repaired", run_id)
         if has_parts(files.folder):  # what was flushed before the crash, as one timeseries.npz
             try:
-                consolidate(files.folder, files.timeseries)
+                consolidate(files.folder, files.timeseries, load=False)
             except Exception as exc:
                 log.warning("run %s: cannot consolidate its time series: %s", run_id, exc)
         if not files.timeseries.is_file():

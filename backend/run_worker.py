@@ -311,7 +311,7 @@ class RunWorker(RunChanges):
             write_json_atomic(self.files.metrics, metrics)
         try:
             self.flush(metrics)
-            consolidate(self.files.folder, self.files.timeseries)  # timeseries.npz of product.md
+            consolidate(self.files.folder, self.files.timeseries, load=False)  # timeseries.npz of product.md
         finally:
             if self.recording is not None:
                 self.recording.close()

@@ -60,7 +60,7 @@ def test_finding_08_series_appended_not_rewritten(tmp_path, small_cfg, monkeypat
 def test_finding_08_parts_equal_the_record(tmp_path, small_cfg) -> None:
     """The consolidated parts are exactly RunRecord.arrays() (the layout of product.md), events included."""
     from conftest import FakeLoop
-    from twin.runs.series_store import SeriesStore, consolidate, load_parts
+    from twin.runs.series_store import SeriesStore, consolidate, load_parts, write_parts
     from twin.scenario import Scenario
 
     loop = FakeLoop(small_cfg, Scenario(duration=5.0))
@@ -77,12 +77,22 @@ def test_finding_08_parts_equal_the_record(tmp_path, small_cfg) -> None:
     assert set(got) == set(expected)
     for key, value in expected.items():
         np.testing.assert_array_equal(got[key], value, err_msg=key)
+    # written one series at a time (the server's way): the same arrays, dtypes and shapes
+    write_parts(tmp_path, tmp_path / "streamed.npz")
+    streamed = load_arrays(tmp_path / "streamed.npz")
+    assert set(streamed) == set(expected)
+    for key, value in expected.items():
+        np.testing.assert_array_equal(streamed[key], value, err_msg=key)
+        assert streamed[key].dtype == np.asarray(value).dtype, key
     # a part cut short by a crash: the series ends before it and stays readable
     last = sorted((tmp_path / "timeseries.parts").glob("part-*.npz"))[-1]
     last.write_bytes(last.read_bytes()[:100])
-    assert len(load_parts(tmp_path)["t"]) < 50
+    cut = load_parts(tmp_path)
+    assert len(cut["t"]) < 50
     arrays = consolidate(tmp_path, tmp_path / "timeseries.npz")
     assert len(load_arrays(tmp_path / "timeseries.npz")["t"]) == len(arrays["t"]) > 40
+    for key, value in cut.items():
+        np.testing.assert_array_equal(arrays[key], value, err_msg=key)
 
 
 def test_finding_08_live_download_and_series(tmp_path, small_cfg) -> None:

@@ -8,7 +8,9 @@ write 1.1 GB for a 175 MB file.  Here each flush writes only the samples since t
   each written atomically (tmp file, fsync, rename), so a crash loses at most the flush in progress;
 * at the end :func:`consolidate` writes ``timeseries.npz`` in the layout of product.md (the parts
   concatenated after the header, the same arrays as ``RunRecord.arrays()``) and removes the parts;
-  after a crash the server's recovery does the same with what was flushed.
+  after a crash the server's recovery does the same with what was flushed.  It writes one series at a
+  time (:func:`write_parts`), so the server holds one concatenated array, not the whole run: a 1 h run
+  at speed max raised the server's memory by 23 MB while it finished when all parts were loaded at once.
 
 Bytes written over a run: about once its final size (plus one small header).
 
@@ -36,6 +38,7 @@ Example
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import uuid
 import zipfile
@@ -110,15 +113,63 @@ def load_parts(folder: Path) -> dict[str, Any]:
     return out
 
 
-def consolidate(folder: Path, path: Path) -> dict[str, Any]:
-    """Write ``path`` (``timeseries.npz``) from the parts and remove them; returns the arrays.  Without
+def _readable_parts(folder: Path) -> list[Path]:
+    """The parts up to the first that cannot be read (the flush a crash interrupted; :func:`load_parts`)."""
+    good = []
+    for part in sorted(parts_dir(folder).glob("part-*.npz")):
+        try:
+            load_arrays(part)  # one flush's samples: small
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:
+            log.warning("%s is unreadable (%s): the series ends before it", part, exc)
+            break
+        good.append(part)
+    return good
+
+
+def write_parts(folder: Path, path: Path) -> None:
+    """Write the parts as one uncompressed ``.npz`` at ``path`` (atomically, as
+    :func:`twin.runs.record.save_arrays`), the same arrays as ``save_arrays(path, load_parts(folder))`` but
+    concatenated and written one series at a time."""
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp.npz")
+    parts = _readable_parts(folder)
+    keys: list[str] = []  # in the order load_parts gives them: by first appearance
+    for part in parts:
+        with np.load(part, allow_pickle=False) as z:
+            keys += [k for k in z.files if k not in keys]
+    header = load_arrays(parts_dir(folder) / HEADER)
+    with open(tmp, "wb") as fh:
+        with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name, value in header.items():
+                if name not in keys:
+                    _write_member(zf, name, value)
+            for name in keys:
+                chunks = []
+                for part in parts:
+                    with np.load(part, allow_pickle=False) as z:
+                        if name in z.files:
+                            chunks.append(z[name])
+                _write_member(zf, name, np.concatenate(chunks))
+                del chunks
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, p)
+
+
+def _write_member(zf: zipfile.ZipFile, name: str, value: Any) -> None:
+    with zf.open(name + ".npy", mode="w", force_zip64=True) as member:
+        np.lib.format.write_array(member, np.asarray(value), allow_pickle=False)
+
+
+def consolidate(folder: Path, path: Path, *, load: bool = True) -> dict[str, Any]:
+    """Write ``path`` (``timeseries.npz``) from the parts (:func:`write_parts`) and remove them; returns the
+    arrays read back from ``path`` (``load=False``: nothing, the server's way of finishing a run).  Without
     parts, returns what ``path`` holds (already consolidated; nothing if the run stored no sample)."""
     if not has_parts(folder):
-        return load_arrays(path) if Path(path).is_file() else {}
-    arrays = load_parts(folder)
-    save_arrays(path, arrays, compress=False)
+        return load_arrays(path) if load and Path(path).is_file() else {}
+    write_parts(folder, path)
     shutil.rmtree(parts_dir(folder), ignore_errors=True)
-    return arrays
+    return load_arrays(path) if load else {}
 
 
 def snapshot_file(folder: Path, path: Path, tmp_dir: Path | None = None) -> Path:
@@ -127,5 +178,5 @@ def snapshot_file(folder: Path, path: Path, tmp_dir: Path | None = None) -> Path
     if not has_parts(folder):
         return path
     tmp = Path(tmp_dir or folder) / f".timeseries-{uuid.uuid4().hex}.npz"
-    save_arrays(tmp, load_parts(folder), compress=False)
+    write_parts(folder, tmp)
     return tmp
