@@ -36,6 +36,28 @@ def test_fields_every_sample_then_every_kth() -> None:
     np.testing.assert_allclose(a["field_hat"][:, 0, 0], 900.0 + np.round(np.asarray(expected) / 0.1))
 
 
+def test_a_record_sized_for_its_run_never_reallocates() -> None:
+    """capacity_for covers the run's samples and fields (here 101 and 47, as counted above), so the arrays
+    reserved at the first sample are the ones written to the end: the memory grows with the data, not by
+    doubled buffers; a sample beyond the estimate still fits."""
+    cap = RunRecord.capacity_for(101, 0.1, 10, 4.0)
+    assert cap[0] == 101 and 47 <= cap[1] <= 48
+    rec, ref = _record(field_every=10, full_rate_until=4.0, capacity=cap), _record(field_every=10, full_rate_until=4.0)
+    rec.append(_snap(0))
+    buffers = {k: c._data for k, c in {**rec._columns, **rec._fields}.items()}
+    ref.append(_snap(0))
+    for j in range(1, 101):
+        rec.append(_snap(j))
+        ref.append(_snap(j))
+    assert all(c._data is buffers[k] for k, c in {**rec._columns, **rec._fields}.items())
+    rec.append(_snap(101))
+    ref.append(_snap(101))
+    a, b = rec.arrays(), ref.arrays()
+    assert set(a) == set(b)
+    for k in b:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
 def test_metrics_unchanged_within_the_windows() -> None:
     full, thin = _record(), _record(field_every=10, full_rate_until=4.0)
     for j in range(41):

@@ -165,8 +165,10 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
         )
         # fields at every sample through the metrics' windows (up to 2 t_E), then one per second (memory)
-        self.record = RunRecord(header, has_truth=self._has_truth, field_every=max(1, round(1.0 / self.t_s)),
-                                full_rate_until=2.0 * float(scenario.reference.t_E))
+        field_every, full_rate_until = max(1, round(1.0 / self.t_s)), 2.0 * float(scenario.reference.t_E)
+        capacity = RunRecord.capacity_for(self.n_steps + 1, self.t_s, field_every, full_rate_until)
+        self.record = RunRecord(header, has_truth=self._has_truth, field_every=field_every,
+                                full_rate_until=full_rate_until, capacity=capacity)
         self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []

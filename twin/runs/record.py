@@ -143,15 +143,22 @@ class RunHeader:
 
 
 class _Column:
-    """A growing array (amortised doubling), read without copying the unused tail."""
+    """A growing array (amortised doubling), read without copying the unused tail.
 
-    def __init__(self, shape: tuple[int, ...], dtype: Any) -> None:
-        self._data = np.empty((64, *shape), dtype)
+    The doubled buffer is allocated empty and only the samples so far are copied into it, so its unused
+    half stays untouched and takes no memory until it is written (copying the whole old buffer next to
+    an empty one, as ``np.concatenate`` does, touched it: a 1 h run's fields grew by 15 MB in one step).
+    """
+
+    def __init__(self, shape: tuple[int, ...], dtype: Any, capacity: int = 64) -> None:
+        self._data = np.empty((max(64, int(capacity)), *shape), dtype)  # untouched until written
         self.n = 0
 
     def append(self, value: Any) -> None:
         if self.n == len(self._data):
-            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+            grown = np.empty((2 * len(self._data), *self._data.shape[1:]), self._data.dtype)
+            grown[: self.n] = self._data
+            self._data = grown
         self._data[self.n] = value
         self.n += 1
 
@@ -166,20 +173,31 @@ class RunRecord:
     ----------
     header : the run's constants
     has_truth : the furnace reports a true field (a simulation); otherwise ``field_true`` is absent
+    capacity : (samples, fields) the run is expected to keep: the arrays are reserved for them at once, so
+        a run of known length grows its memory with its data and never by doubling a buffer (more
+        samples than expected still fit, by doubling)
     """
 
     def __init__(self, header: RunHeader, *, has_truth: bool = True, field_every: int = 1,
-                 full_rate_until: float = np.inf) -> None:
+                 full_rate_until: float = np.inf, capacity: tuple[int, int] = (64, 64)) -> None:
         self.header = header
         self.has_truth = has_truth
         self.field_every = max(1, int(field_every))
         self.full_rate_until = float(full_rate_until)
+        self.capacity = capacity
         self._columns: dict[str, _Column] = {}
         self._fields: dict[str, _Column] = {}  # t_field and the field series
         self._since_field = 0
         self._optional: tuple[str, ...] = ()
         self._events: list[RunEvent] = []
         self._changes: list[RunChange] = []
+
+    @staticmethod
+    def capacity_for(n_samples: int, t_s: float, field_every: int, full_rate_until: float) -> tuple[int, int]:
+        """(samples, fields) a run of ``n_samples`` keeps without live changes: a field at every sample up to
+        ``full_rate_until`` (s), then one every ``field_every`` samples (an upper bound, by one field)."""
+        n_full = min(n_samples, int(np.floor(full_rate_until / t_s + 1e-9)) + 1)
+        return n_samples, n_full + (n_samples - n_full) // max(1, field_every) + 1
 
     def __len__(self) -> int:
         return self._columns["t"].n if self._columns else 0
@@ -200,7 +218,7 @@ class RunRecord:
                 values[k] = v
         if not self._columns:
             for k, v in values.items():
-                self._columns[k] = _Column(np.shape(v), np.int8 if k == "tc_status" else float)
+                self._columns[k] = _Column(np.shape(v), np.int8 if k == "tc_status" else float, self.capacity[0])
         for k, v in values.items():
             self._columns[k].append(v)
         self._since_field += 1
@@ -214,7 +232,8 @@ class RunRecord:
                     fields_now[k] = getattr(snap, k)
             if not self._fields:
                 for k, v in fields_now.items():
-                    self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float)
+                    self._fields[k] = _Column(np.shape(v), np.float32 if k in FIELD_SERIES else float,
+                                              self.capacity[1])
             for k, v in fields_now.items():
                 self._fields[k].append(v)
         self._events.extend(RunEvent(float(snap.t), str(e), event_level(str(e))) for e in snap.events)
