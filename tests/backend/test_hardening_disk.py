@@ -57,7 +57,7 @@ def test_finding_08_series_appended_not_rewritten(tmp_path, small_cfg, monkeypat
         assert not (path.parent / "timeseries.parts").exists()
 
 
-def test_finding_08_parts_equal_the_record(tmp_path, small_cfg) -> None:
+def test_finding_08_parts_equal_the_record(tmp_path, small_cfg, monkeypatch) -> None:
     """The consolidated parts are exactly RunRecord.arrays() (the layout of product.md), events included."""
     from conftest import FakeLoop
     from twin.runs.series_store import SeriesStore, consolidate, load_parts, write_parts
@@ -77,13 +77,17 @@ def test_finding_08_parts_equal_the_record(tmp_path, small_cfg) -> None:
     assert set(got) == set(expected)
     for key, value in expected.items():
         np.testing.assert_array_equal(got[key], value, err_msg=key)
-    # written one series at a time (the server's way): the same arrays, dtypes and shapes
-    write_parts(tmp_path, tmp_path / "streamed.npz")
-    streamed = load_arrays(tmp_path / "streamed.npz")
-    assert set(streamed) == set(expected)
-    for key, value in expected.items():
-        np.testing.assert_array_equal(streamed[key], value, err_msg=key)
-        assert streamed[key].dtype == np.asarray(value).dtype, key
+    # written by passes over the parts (the server's way): the same arrays, dtypes and shapes, whether the
+    # series are gathered together (all small here) or each in a pass of its own (as the fields of a long run)
+    for separate in (None, 0):
+        if separate is not None:
+            monkeypatch.setattr("twin.runs.series_store.SEPARATE_BYTES", separate)
+        write_parts(tmp_path, tmp_path / "streamed.npz")
+        streamed = load_arrays(tmp_path / "streamed.npz")
+        assert set(streamed) == set(expected)
+        for key, value in expected.items():
+            np.testing.assert_array_equal(streamed[key], value, err_msg=key)
+            assert streamed[key].dtype == np.asarray(value).dtype, key
     # a part cut short by a crash: the series ends before it and stays readable
     last = sorted((tmp_path / "timeseries.parts").glob("part-*.npz"))[-1]
     last.write_bytes(last.read_bytes()[:100])

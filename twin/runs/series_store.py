@@ -113,44 +113,58 @@ def load_parts(folder: Path) -> dict[str, Any]:
     return out
 
 
-def _readable_parts(folder: Path) -> list[Path]:
-    """The parts up to the first that cannot be read (the flush a crash interrupted; :func:`load_parts`)."""
-    good = []
+#: a series larger than this (bytes over the whole run: the fields) is gathered in a pass of its own
+SEPARATE_BYTES = 4 * 1024 * 1024
+
+
+def _readable_parts(folder: Path) -> tuple[list[Path], dict[str, int]]:
+    """The parts up to the first that cannot be read (the flush a crash interrupted; :func:`load_parts`),
+    and the bytes of each series over them, in the order of first appearance (as ``load_parts``)."""
+    good: list[Path] = []
+    sizes: dict[str, int] = {}
     for part in sorted(parts_dir(folder).glob("part-*.npz")):
         try:
-            load_arrays(part)  # one flush's samples: small
+            arrays = load_arrays(part)  # one flush's samples: small
         except (OSError, ValueError, zipfile.BadZipFile) as exc:
             log.warning("%s is unreadable (%s): the series ends before it", part, exc)
             break
         good.append(part)
-    return good
+        for k, v in arrays.items():
+            sizes[k] = sizes.get(k, 0) + int(np.asarray(v).nbytes)
+    return good, sizes
+
+
+def _gather(parts: list[Path], keys: list[str]) -> dict[str, list[Any]]:
+    chunks: dict[str, list[Any]] = {k: [] for k in keys}
+    for part in parts:
+        with np.load(part, allow_pickle=False) as z:
+            for k in keys:
+                if k in z.files:
+                    chunks[k].append(z[k])
+    return chunks
 
 
 def write_parts(folder: Path, path: Path) -> None:
     """Write the parts as one uncompressed ``.npz`` at ``path`` (atomically, as
-    :func:`twin.runs.record.save_arrays`), the same arrays as ``save_arrays(path, load_parts(folder))`` but
-    concatenated and written one series at a time."""
+    :func:`twin.runs.record.save_arrays`): the same arrays as ``save_arrays(path, load_parts(folder))``, but
+    the small series are gathered in one pass over the parts and each large one (a field) in a pass of its
+    own, so only one large series is in memory at a time."""
     p = Path(path)
     tmp = p.with_name(p.name + ".tmp.npz")
-    parts = _readable_parts(folder)
-    keys: list[str] = []  # in the order load_parts gives them: by first appearance
-    for part in parts:
-        with np.load(part, allow_pickle=False) as z:
-            keys += [k for k in z.files if k not in keys]
+    parts, sizes = _readable_parts(folder)
     header = load_arrays(parts_dir(folder) / HEADER)
+    large = [k for k, n in sizes.items() if n > SEPARATE_BYTES]
+    small = [k for k in sizes if k not in large]
     with open(tmp, "wb") as fh:
         with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
             for name, value in header.items():
-                if name not in keys:
+                if name not in sizes:
                     _write_member(zf, name, value)
-            for name in keys:
-                chunks = []
-                for part in parts:
-                    with np.load(part, allow_pickle=False) as z:
-                        if name in z.files:
-                            chunks.append(z[name])
-                _write_member(zf, name, np.concatenate(chunks))
-                del chunks
+            chunks = _gather(parts, small)
+            for name in small:
+                _write_member(zf, name, np.concatenate(chunks.pop(name)))
+            for name in large:
+                _write_member(zf, name, np.concatenate(_gather(parts, [name])[name]))
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, p)
