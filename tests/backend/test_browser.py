@@ -334,7 +334,8 @@ def test_reload_shows_the_whole_history_and_every_tab_the_same_events(browser, t
         first, errors = _open_dashboard(browser, srv.url)  # shows the newest running run
         first.wait_for_function("state.runId !== null && state.series.t.length > 5", timeout=60_000)
         deadline = time.monotonic() + 60
-        while httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()["latest"]["t"] < 3.0:
+        # the run's `latest` is stored at its first flush: null until then, while the page streams already
+        while (httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()["latest"] or {}).get("t", 0.0) < 3.0:
             assert time.monotonic() < deadline
             time.sleep(0.2)
         change = httpx.put(f"{srv.url}/api/runs/{run_id}/reference", json={"setpoint": 950.0, "t_E": 4.0},
