@@ -57,7 +57,7 @@ def test_finding_08_series_appended_not_rewritten(tmp_path, small_cfg, monkeypat
         assert not (path.parent / "timeseries.parts").exists()
 
 
-def test_finding_08_parts_equal_the_record(tmp_path, small_cfg, monkeypatch) -> None:
+def test_finding_08_parts_equal_the_record(tmp_path, small_cfg) -> None:
     """The consolidated parts are exactly RunRecord.arrays() (the layout of product.md), events included."""
     from conftest import FakeLoop
     from twin.runs.series_store import SeriesStore, consolidate, load_parts, write_parts
@@ -77,17 +77,14 @@ def test_finding_08_parts_equal_the_record(tmp_path, small_cfg, monkeypatch) -> 
     assert set(got) == set(expected)
     for key, value in expected.items():
         np.testing.assert_array_equal(got[key], value, err_msg=key)
-    # written by passes over the parts (the server's way): the same arrays, dtypes and shapes, whether the
-    # series are gathered together (all small here) or each in a pass of its own (as the fields of a long run)
-    for separate in (None, 0):
-        if separate is not None:
-            monkeypatch.setattr("twin.runs.series_store.SEPARATE_BYTES", separate)
-        write_parts(tmp_path, tmp_path / "streamed.npz")
-        streamed = load_arrays(tmp_path / "streamed.npz")
-        assert set(streamed) == set(expected)
-        for key, value in expected.items():
-            np.testing.assert_array_equal(streamed[key], value, err_msg=key)
-            assert streamed[key].dtype == np.asarray(value).dtype, key
+    # written part by part through raw files (the server's way): the same arrays, dtypes and shapes
+    write_parts(tmp_path, tmp_path / "streamed.npz")
+    streamed = load_arrays(tmp_path / "streamed.npz")
+    assert set(streamed) == set(expected)
+    for key, value in expected.items():
+        np.testing.assert_array_equal(streamed[key], value, err_msg=key)
+        assert streamed[key].dtype == np.asarray(value).dtype, key
+    assert not list(tmp_path.glob("streamed.npz.*"))  # its raw files and temporary are gone
     # a part cut short by a crash: the series ends before it and stays readable
     last = sorted((tmp_path / "timeseries.parts").glob("part-*.npz"))[-1]
     last.write_bytes(last.read_bytes()[:100])
@@ -97,6 +94,37 @@ def test_finding_08_parts_equal_the_record(tmp_path, small_cfg, monkeypatch) -> 
     assert len(load_arrays(tmp_path / "timeseries.npz")["t"]) == len(arrays["t"]) > 40
     for key, value in cut.items():
         np.testing.assert_array_equal(arrays[key], value, err_msg=key)
+
+
+def test_finding_08_written_parts_equal_their_concatenation(tmp_path) -> None:
+    """Oracle: write_parts gives what np.concatenate of each series over the parts gives (load_parts): a series
+    that first appears in a later part, texts of different lengths, a series whose dtype changes (kept in
+    memory then, promoted as np.concatenate promotes), and a cut last part that ends the series."""
+    from twin.runs.record import save_arrays
+    from twin.runs.series_store import load_parts, parts_dir, write_parts
+
+    d = parts_dir(tmp_path)
+    save_arrays(d / "header.npz", {"x": np.arange(3.0), "setpoint": np.array(1000.0)}, compress=False)
+    rng = np.random.default_rng(0)
+    parts = [
+        {"t": np.array([0.0, 0.1, 0.2]), "field": rng.random((3, 2, 2)).astype(np.float32),
+         "event_text": np.array(["abc"])},
+        {"t": np.array([0.3, 0.4]), "field": rng.random((2, 2, 2)).astype(np.float32),
+         "event_text": np.array(["a longer text", "x"]), "tc_status": np.ones((2, 4), np.int8)},
+        {"t": np.array([5, 6]), "field": rng.random((2, 2, 2)).astype(np.float32),  # t as integers here
+         "event_text": np.array([], dtype="<U1"), "tc_status": np.zeros((2, 4), np.int8)},
+    ]
+    for i, arrays in enumerate(parts, start=1):
+        save_arrays(d / f"part-{i:06d}.npz", arrays, compress=False)
+    (d / "part-000004.npz").write_bytes(b"PK\x03\x04 cut short")
+    expected = load_parts(tmp_path)
+    assert len(expected["t"]) == 7 and expected["event_text"].dtype == np.dtype("<U13")
+    write_parts(tmp_path, tmp_path / "timeseries.npz")
+    got = load_arrays(tmp_path / "timeseries.npz")
+    assert list(got) == list(expected)
+    for key, value in expected.items():
+        np.testing.assert_array_equal(got[key], value, err_msg=key)
+        assert got[key].dtype == value.dtype and got[key].shape == value.shape, key
 
 
 def test_finding_08_live_download_and_series(tmp_path, small_cfg) -> None:

@@ -8,9 +8,9 @@ write 1.1 GB for a 175 MB file.  Here each flush writes only the samples since t
   each written atomically (tmp file, fsync, rename), so a crash loses at most the flush in progress;
 * at the end :func:`consolidate` writes ``timeseries.npz`` in the layout of product.md (the parts
   concatenated after the header, the same arrays as ``RunRecord.arrays()``) and removes the parts;
-  after a crash the server's recovery does the same with what was flushed.  It writes one series at a
-  time (:func:`write_parts`), so the server holds one concatenated array, not the whole run: a 1 h run
-  at speed max raised the server's memory by 23 MB while it finished when all parts were loaded at once.
+  after a crash the server's recovery does the same with what was flushed.  It holds one part in memory
+  at a time (:func:`write_parts`), not the whole run: a 1 h run at speed max raised the server's memory by
+  23 MB while it finished when all parts were loaded at once.
 
 Bytes written over a run: about once its final size (plus one small header).
 
@@ -113,61 +113,64 @@ def load_parts(folder: Path) -> dict[str, Any]:
     return out
 
 
-#: a series larger than this (bytes over the whole run: the fields) is gathered in a pass of its own
-SEPARATE_BYTES = 4 * 1024 * 1024
-
-
-def _readable_parts(folder: Path) -> tuple[list[Path], dict[str, int]]:
-    """The parts up to the first that cannot be read (the flush a crash interrupted; :func:`load_parts`),
-    and the bytes of each series over them, in the order of first appearance (as ``load_parts``)."""
-    good: list[Path] = []
-    sizes: dict[str, int] = {}
-    for part in sorted(parts_dir(folder).glob("part-*.npz")):
-        try:
-            arrays = load_arrays(part)  # one flush's samples: small
-        except (OSError, ValueError, zipfile.BadZipFile) as exc:
-            log.warning("%s is unreadable (%s): the series ends before it", part, exc)
-            break
-        good.append(part)
-        for k, v in arrays.items():
-            sizes[k] = sizes.get(k, 0) + int(np.asarray(v).nbytes)
-    return good, sizes
-
-
-def _gather(parts: list[Path], keys: list[str]) -> dict[str, list[Any]]:
-    chunks: dict[str, list[Any]] = {k: [] for k in keys}
-    for part in parts:
-        with np.load(part, allow_pickle=False) as z:
-            for k in keys:
-                if k in z.files:
-                    chunks[k].append(z[k])
-    return chunks
-
-
 def write_parts(folder: Path, path: Path) -> None:
     """Write the parts as one uncompressed ``.npz`` at ``path`` (atomically, as
-    :func:`twin.runs.record.save_arrays`): the same arrays as ``save_arrays(path, load_parts(folder))``, but
-    the small series are gathered in one pass over the parts and each large one (a field) in a pass of its
-    own, so only one large series is in memory at a time."""
+    :func:`twin.runs.record.save_arrays`): the same arrays as ``save_arrays(path, load_parts(folder))``, with
+    one part in memory at a time.  Each part is read once; its numeric series are appended to raw files
+    beside ``path``, each of which then becomes one ``.npy`` member (its header written for the rows it
+    holds); the texts (events) are concatenated in memory, as ``load_parts`` does.  A part that cannot be
+    read ends the series there (the flush a crash interrupted)."""
     p = Path(path)
     tmp = p.with_name(p.name + ".tmp.npz")
-    parts, sizes = _readable_parts(folder)
-    header = load_arrays(parts_dir(folder) / HEADER)
-    large = [k for k, n in sizes.items() if n > SEPARATE_BYTES]
-    small = [k for k in sizes if k not in large]
-    with open(tmp, "wb") as fh:
-        with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-            for name, value in header.items():
-                if name not in sizes:
-                    _write_member(zf, name, value)
-            chunks = _gather(parts, small)
-            for name in small:
-                _write_member(zf, name, np.concatenate(chunks.pop(name)))
-            for name in large:
-                _write_member(zf, name, np.concatenate(_gather(parts, [name])[name]))
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, p)
+    raw_dir = p.with_name(p.name + ".raw")
+    raw_dir.mkdir(parents=True, exist_ok=True)
+    order: list[str] = []  # series in the order of first appearance, as load_parts
+    raw: dict[str, tuple[Path, np.dtype[Any], tuple[int, ...], int]] = {}  # file, dtype, row shape, rows
+    memory: dict[str, list[Any]] = {}
+    try:
+        for part in sorted(parts_dir(folder).glob("part-*.npz")):
+            try:
+                arrays = load_arrays(part)  # one flush's samples: small
+            except (OSError, ValueError, zipfile.BadZipFile) as exc:
+                log.warning("%s is unreadable (%s): the series ends before it", part, exc)
+                break
+            for k, v in arrays.items():
+                a = np.ascontiguousarray(v)
+                if k not in order:
+                    order.append(k)
+                if k in raw and (a.dtype, a.shape[1:]) != raw[k][1:3]:  # unlike the earlier parts: in memory
+                    file, dtype, row, _ = raw.pop(k)
+                    memory[k] = [np.fromfile(file, dtype).reshape(-1, *row)]
+                if k in memory or a.ndim == 0 or a.dtype.kind not in "biufc":
+                    memory.setdefault(k, []).append(a)
+                    continue
+                file, dtype, row, rows = raw.get(k, (raw_dir / f"{len(order)}.raw", a.dtype, a.shape[1:], 0))
+                with open(file, "ab") as f:
+                    a.tofile(f)
+                raw[k] = (file, dtype, row, rows + len(a))
+        header = load_arrays(parts_dir(folder) / HEADER)
+        with open(tmp, "wb") as fh:
+            with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                for name, value in header.items():
+                    if name not in order:
+                        _write_member(zf, name, value)
+                for name in order:
+                    if name in memory:
+                        _write_member(zf, name, np.concatenate(memory.pop(name)))
+                        continue
+                    file, dtype, row, rows = raw[name]
+                    with zf.open(name + ".npy", mode="w", force_zip64=True) as member:
+                        np.lib.format.write_array_header_1_0(member, {
+                            "descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                            "shape": (rows, *row)})
+                        with open(file, "rb") as f:
+                            shutil.copyfileobj(f, member, 1 << 20)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, p)
+    finally:
+        shutil.rmtree(raw_dir, ignore_errors=True)
+        tmp.unlink(missing_ok=True)
 
 
 def _write_member(zf: zipfile.ZipFile, name: str, value: Any) -> None:
