@@ -144,7 +144,7 @@ def write_parts(folder: Path, path: Path) -> None:
                 if k in memory or a.ndim == 0 or a.dtype.kind not in "biufc":
                     memory.setdefault(k, []).append(a)
                     continue
-                file, dtype, row, rows = raw.get(k, (raw_dir / f"{len(order)}.raw", a.dtype, a.shape[1:], 0))
+                file, dtype, row, rows = raw.get(k, (raw_dir / f"{order.index(k)}.raw", a.dtype, a.shape[1:], 0))
                 with open(file, "ab") as f:
                     a.tofile(f)
                 raw[k] = (file, dtype, row, rows + len(a))
