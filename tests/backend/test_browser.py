@@ -39,8 +39,8 @@ def _text(page, selector: str) -> str:
     return page.inner_text(selector)
 
 
-def _open_dashboard(browser, url: str):
-    page = browser.new_page(viewport={"width": 1280, "height": 800})
+def _open_dashboard(browser, url: str, width: int = 1280, height: int = 800):
+    page = browser.new_page(viewport={"width": width, "height": height})
     errors: list[str] = []
     # a refused request (401 / 422) is logged by chromium as a failed resource: expected here
     page.on("console", lambda m: errors.append(m.text)

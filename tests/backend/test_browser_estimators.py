@@ -9,6 +9,7 @@ from __future__ import annotations
 import httpx
 import numpy as np
 import pytest
+from test_browser import _open_dashboard
 
 from backend.app import create_app
 from backend.settings import Settings
@@ -25,18 +26,6 @@ def server(tmp_path_factory, small_cfg):
     s = Settings(data_dir=tmp_path_factory.mktemp("browser-estimators"), viser_port=0)
     with ThreadedServer(create_app(s, small_cfg), free_port()) as srv:
         yield srv
-
-
-def _open(browser, url: str):
-    page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text)
-            if m.type == "error" and "Failed to load resource" not in m.text else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url, timeout=120_000)  # plotly.js is 4.6 MB: slow to load on a loaded machine
-    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
-                           timeout=120_000)
-    return page, errors
 
 
 def _shown(page) -> dict[str, bool]:
@@ -82,7 +71,7 @@ def _wait_done(url: str, run_id: str, timeout: float = 300.0) -> dict:
 
 
 def test_a_shadow_run_from_the_form_shows_the_three_estimator_cards(server, browser, artifacts, small_cfg) -> None:
-    page, errors = _open(browser, server.url)
+    page, errors = _open_dashboard(browser, server.url, WIDTH, HEIGHT)
     # before any run: no estimator card; the form preselects the server's default estimator (GET /api/furnace)
     assert _shown(page) == dict.fromkeys(CARDS, False)
     default = httpx.get(f"{server.url}/api/furnace", timeout=10).json()["defaults"]["estimator"]
@@ -185,7 +174,7 @@ def test_a_run_without_calibration_or_shadow_shows_none_of_them(server, browser,
     r = httpx.post(f"{server.url}/api/runs", json=body, timeout=120)
     assert r.status_code == 201, r.text
     assert _wait_done(server.url, r.json()["id"])["status"] == "finished"
-    page, errors = _open(browser, server.url)
+    page, errors = _open_dashboard(browser, server.url, WIDTH, HEIGHT)
     _drawn(page, r.json()["id"])
     assert _shown(page) == dict.fromkeys(CARDS, True)
     # the paper's estimator without a shadow, from the form: the cards go with the run they belonged to

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import httpx
 import pytest
+from test_browser import _wait_text
 
 from backend.app import create_app
 from backend.settings import Settings
@@ -17,14 +18,6 @@ from conftest import wait_model_ready
 pytestmark = pytest.mark.browser
 
 LIVE_RUN = {"duration": 600.0, "speed": 2.0, "reference": {"setpoint": 900.0, "t_E": 8.0}}  # as test_browser.py
-
-
-def _wait_text(page, selector: str, needle: str, timeout: float = 90_000) -> None:
-    try:
-        page.wait_for_function("([s, n]) => document.querySelector(s).textContent.includes(n)",
-                               arg=[selector, needle], timeout=timeout)
-    except Exception as exc:
-        raise AssertionError(f"{selector} never showed {needle!r}: {page.inner_text(selector)!r}") from exc
 
 
 def test_inject_and_clear_a_fault_from_the_dashboard(tmp_path, small_cfg, browser, artifacts) -> None:
