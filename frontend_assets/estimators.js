@@ -6,6 +6,7 @@
 import { baseLayout, registerFigure } from "./charts.js";
 import { describeChoice } from "./estimatorform.js";
 import { termText } from "./glossary.js";
+import { fieldLayout, tcPositions } from "./heatmap.js";
 import { windowShapes } from "./overlays.js";
 import { $, fmt } from "./page.js";
 import { addChartCard } from "./panels.js";
@@ -84,8 +85,7 @@ function deltaFigure() {
   const s = series();
   if (!show("shadow-delta-plot", !!s.shadowDelta)) return null;
   const fu = state.furnace, z = s.shadowDelta, big = largest(z), m = symmetricRange(big);
-  const [x0, x1, y0, y1] = fu.fillet;
-  const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
+  const [tcx, tcy] = tcPositions();
   const f = state.lastFrame;
   $("shadow-delta-sub").textContent = `${f ? `t = ${fmt(f.t)} s · ` : ""}max |Δ| ${fmt(big, big < 1 ? 2 : 1)} K`;
   return {
@@ -93,18 +93,13 @@ function deltaFigure() {
       { type: "heatmap", x: fu.x, y: fu.y, z, colorscale: DIVERGING, zmid: 0, zmin: -m, zmax: m, zsmooth: "best",
         colorbar: { title: { text: "K", side: "right" }, thickness: 12, len: 0.95 },
         hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>shadow − estimate %{z:.2f} K<extra></extra>" },
-      { type: "scatter", mode: "markers+text", x: tcRel.map((p) => p[0] * fu.L_s), y: tcRel.map((p) => p[1] * fu.W_s),
+      { type: "scatter", mode: "markers+text", x: tcx, y: tcy,
         text: ["TC1", "TC2", "TC3", "TC4"], textposition: ["top center", "top center", "top center", "bottom center"],
         textfont: { size: 10, color: "#1d2330" }, hoverinfo: "skip", showlegend: false,
         marker: { symbol: ["circle", "circle", "circle", "diamond"], size: 8, color: ["#fff", "#fff", "#fff", "#ff4fc8"],
           line: { color: "#000", width: 1.2 } } },
     ],
-    layout: {
-      margin: { l: 50, r: 10, t: 6, b: 34 }, paper_bgcolor: "#fff", plot_bgcolor: "#e8ecf2", font: { size: 11, color: "#1d2330" },
-      xaxis: { title: { text: "x (m)", standoff: 2 }, range: [0, fu.L_s], constrain: "domain" },
-      yaxis: { title: { text: "y (m)", standoff: 2 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
-      shapes: [{ type: "rect", x0, x1, y0, y1, line: { color: "#56627a", width: 1.5, dash: "dash" } }],
-    },
+    layout: fieldLayout("x (m)", { color: "#56627a", width: 1.5 }),
   };
 }
 

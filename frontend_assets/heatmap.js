@@ -20,11 +20,29 @@ function scaleOf(z) {
   return [lo, hi];
 }
 
+// TC1-TC3 where the furnace has them, TC4 where the shown run put it (m): [x], [y]
+export function tcPositions() {
+  const fu = state.furnace;
+  const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
+  return [tcRel.map((p) => p[0] * fu.L_s), tcRel.map((p) => p[1] * fu.W_s)];
+}
+
+// The layout of a field over the specimen (true aspect ratio) with the fillet's frame drawn as `frame`
+export function fieldLayout(xTitle, frame) {
+  const fu = state.furnace;
+  const [x0, x1, y0, y1] = fu.fillet;
+  return {
+    margin: { l: 50, r: 10, t: 6, b: 34 }, paper_bgcolor: "#fff", plot_bgcolor: "#e8ecf2", font: { size: 11, color: "#1d2330" },
+    xaxis: { title: { text: xTitle, standoff: 2 }, range: [0, fu.L_s], constrain: "domain" },
+    yaxis: { title: { text: "y (m)", standoff: 2 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
+    shapes: [{ type: "rect", x0, x1, y0, y1, line: { ...frame, dash: "dash" } }],
+  };
+}
+
 export function heatmapFigure() {
   const fu = state.furnace, s = state.series;
-  const [x0, x1, y0, y1] = fu.fillet;
-  const tcRel = fu.tc_relative.slice(0, 3).concat([state.run ? state.run.scenario.tc4 : fu.tc_relative[3]]);
-  const tcx = tcRel.map((p) => p[0] * fu.L_s), tcy = tcRel.map((p) => p[1] * fu.W_s);
+  const [x0, , , y1] = fu.fillet;
+  const [tcx, tcy] = tcPositions();
   const z = s && s.field ? s.field : null;
   const [zmin, zmax] = scaleOf(z);
   const tc = s && s.tc ? s.tc : [null, null, null, null];
@@ -44,13 +62,7 @@ export function heatmapFigure() {
         marker: { symbol: ["circle", "circle", "circle", "diamond"], size: 9, color: ["#fff", "#fff", "#fff", "#ff4fc8"],
           line: { color: "#000", width: 1.5 } } },
     ],
-    layout: {
-      margin: { l: 50, r: 10, t: 6, b: 34 }, paper_bgcolor: "#fff", plot_bgcolor: "#e8ecf2", font: { size: 11, color: "#1d2330" },
-      xaxis: { title: { text: "x (m), along the specimen length", standoff: 2 }, range: [0, fu.L_s], constrain: "domain" },
-      yaxis: { title: { text: "y (m)", standoff: 2 }, range: [0, fu.W_s], scaleanchor: "x", scaleratio: 1, constrain: "domain" },
-      shapes: [{ type: "rect", x0, x1, y0, y1, line: { color: "#fff", width: 2, dash: "dash" } }],
-      annotations,
-    },
+    layout: { ...fieldLayout("x (m), along the specimen length", { color: "#fff", width: 2 }), annotations },
   };
 }
 
