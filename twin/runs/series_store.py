@@ -42,6 +42,7 @@ import os
 import shutil
 import uuid
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -94,18 +95,24 @@ def has_parts(folder: Path) -> bool:
     return (parts_dir(folder) / HEADER).is_file()
 
 
-def load_parts(folder: Path) -> dict[str, Any]:
-    """The stored parts as one time series (the ``timeseries.npz`` arrays); a part that cannot be read (the
-    flush a crash interrupted) ends the series there."""
-    d = parts_dir(folder)
-    out = load_arrays(d / HEADER)
-    series: dict[str, list[Any]] = {}
-    for part in sorted(d.glob("part-*.npz")):
+def _readable_parts(folder: Path) -> Iterator[dict[str, Any]]:
+    """The stored parts' arrays, oldest first, up to the first that cannot be read (the flush a crash
+    interrupted): the series end before it."""
+    for part in sorted(parts_dir(folder).glob("part-*.npz")):
         try:
             arrays = load_arrays(part)
         except (OSError, ValueError, zipfile.BadZipFile) as exc:
             log.warning("%s is unreadable (%s): the series ends before it", part, exc)
-            break
+            return
+        yield arrays
+
+
+def load_parts(folder: Path) -> dict[str, Any]:
+    """The stored parts as one time series (the ``timeseries.npz`` arrays); a part that cannot be read (the
+    flush a crash interrupted) ends the series there."""
+    out = load_arrays(parts_dir(folder) / HEADER)
+    series: dict[str, list[Any]] = {}
+    for arrays in _readable_parts(folder):
         for k, v in arrays.items():
             series.setdefault(k, []).append(v)
     for k, chunks in series.items():
@@ -128,12 +135,7 @@ def write_parts(folder: Path, path: Path) -> None:
     raw: dict[str, tuple[Path, np.dtype[Any], tuple[int, ...], int]] = {}  # file, dtype, row shape, rows
     memory: dict[str, list[Any]] = {}
     try:
-        for part in sorted(parts_dir(folder).glob("part-*.npz")):
-            try:
-                arrays = load_arrays(part)  # one flush's samples: small
-            except (OSError, ValueError, zipfile.BadZipFile) as exc:
-                log.warning("%s is unreadable (%s): the series ends before it", part, exc)
-                break
+        for arrays in _readable_parts(folder):  # one flush's samples at a time: small
             for k, v in arrays.items():
                 a = np.ascontiguousarray(v)
                 if k not in order:
