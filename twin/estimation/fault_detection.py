@@ -109,8 +109,11 @@ class FaultDetector:
         self._y = np.full(len(TC_NAMES), np.nan)
         self._pending: list[Detection] = []
         self._jac_every = self._n(jacobian_every_s)
-        self._Phi: Array | None = None
-        self._Gamma = np.asarray(model.jac_u(None, None), float)
+        # the signatures' Phi_x = [[dF/dtheta, dF/dp], [0, I]] (16) and Gamma_x = [dF/du; 0] in the filter's
+        # state [theta; p] (plain Phi, Gamma without calibrated parameters); dF/dtheta every jacobian_every_s
+        self._Phi_x = np.eye(model.n + k)
+        self._phi_ready = False
+        self._Gamma_x = self._gamma_x(model)
         self._block: list[Array] = []  # normalised innovations of the current block
         self._block_means: list[Array] = []  # (3,) per finished block, oldest first
         self.inflation = np.ones(N_EKF_TCS)  # kappa per TC (>= 1)
@@ -120,11 +123,16 @@ class FaultDetector:
     def _n(self, seconds: float) -> int:
         return max(1, int(round(seconds / self.t_s)))
 
+    def _gamma_x(self, model: Any) -> Array:
+        gamma = np.asarray(model.jac_u(None, None), float)
+        return np.concatenate([gamma, np.zeros((self.k, gamma.shape[1]))])
+
     def set_model(self, model: Any) -> None:
         """A new nominal model (oscillation switched): signatures restart."""
         self.model = model
-        self._Gamma = np.asarray(model.jac_u(None, None), float)
-        self._Phi = None
+        self._Gamma_x = self._gamma_x(model)
+        self._Phi_x = np.eye(model.n + self.k)
+        self._phi_ready = False
         self.banks.reset()
 
     def set_innovation_tests(self, enabled: bool) -> None:
@@ -351,15 +359,11 @@ class FaultDetector:
         n, k = self.model.n, self.k
         self._u = np.asarray(u, float).copy()
         th = np.asarray(theta, float)[:n]
-        if self._Phi is None or self._j % self._jac_every == 0:
-            self._Phi = np.asarray(self.model.jac_theta(th, u), float)
-        increment = np.asarray(theta_next, float)[:n] - th
-        if not k:
-            self.banks.predict(self._Phi, self._Gamma, u, increment)
-            return
-        Phi_x = np.eye(n + k)  # [[dF/dtheta, dF/dp], [0, I]] (16); p is a random walk
-        Phi_x[:n, :n] = self._Phi
-        if parameter_jacobian is not None:
-            Phi_x[:n, n:] = parameter_jacobian
-        Gamma_x = np.concatenate([self._Gamma, np.zeros((k, self._Gamma.shape[1]))])
-        self.banks.predict(Phi_x, Gamma_x, u, np.concatenate([increment, np.zeros(k)]))
+        if not self._phi_ready or self._j % self._jac_every == 0:
+            self._Phi_x[:n, :n] = self.model.jac_theta(th, u)
+            self._phi_ready = True
+        if k:
+            self._Phi_x[:n, n:] = 0.0 if parameter_jacobian is None else parameter_jacobian
+        increment = np.zeros(n + k)  # the capacity hypothesis' b; p is a random walk: no increment
+        increment[:n] = np.asarray(theta_next, float)[:n] - th
+        self.banks.predict(self._Phi_x, self._Gamma_x, u, increment)
