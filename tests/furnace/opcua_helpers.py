@@ -1,5 +1,6 @@
 """Helpers of the OPC UA tests: an emulator in a subprocess (``furnace-twin emulate``) or in this process
-(a thread with its own event loop), a small-config TOML file, free ports, a synchronous peek client."""
+(a thread with its own event loop), a small-config TOML file, free ports, a synchronous peek client, the
+dashboard's app with OPC UA settings and waiting for a run's status."""
 
 from __future__ import annotations
 
@@ -244,3 +245,28 @@ class TcpProxy:
         asyncio.run_coroutine_threadsafe(stop(), self.loop).result(5)
         self.loop.call_soon_threadsafe(self.loop.stop)
         self._thread.join(5)
+
+
+def twin_app(tmp_path: Path, cfg: Any, **opcua: Any) -> Any:
+    """The dashboard's app on ``cfg`` (a TestClient; use it as a context manager), OPC UA links retried 2 s."""
+    from fastapi.testclient import TestClient
+
+    from backend.app import create_app
+    from backend.settings import Settings
+    from twin.furnace.opcua.options import OpcUaOptions
+
+    settings = Settings(data_dir=tmp_path / "data", flush_interval_s=0.5,
+                        opcua=OpcUaOptions(**{"reconnect_s": 2.0, "connect_timeout_s": 10.0, **opcua}))
+    return TestClient(create_app(settings, cfg), base_url="http://127.0.0.1")
+
+
+def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float) -> dict[str, Any]:
+    """``GET /api/runs/{id}`` until its status is one of ``statuses``."""
+    end = time.monotonic() + timeout
+    body: dict[str, Any] = {}
+    while time.monotonic() < end:
+        body = c.get(f"/api/runs/{run_id}").json()
+        if body["status"] in statuses:
+            return body
+        time.sleep(0.1)
+    raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")

@@ -240,6 +240,45 @@ def test_a_silent_furnace_is_given_up_and_its_lamps_commanded_off(emulated, tmp_
     assert all(emu.emulator.space.value(g) == 0.0 for g in GROUPS)  # ... so the lamps went off
 
 
+def test_a_stalled_twin_learns_what_the_furnace_did_meanwhile(emulated, tmp_path) -> None:
+    """The twin's loop stalls 1.3 s after reading a sample (a loaded machine, a long pause): its samples wait in
+    the buffer and are taken complete, so none is late, but its command went out late and the furnace's watchdog
+    switched the lamps off for the last 0.3 s.  A CI run that did this ended 0.29 % of the setpoint off the
+    in-process run and said nothing; the run's events now say both."""
+    emu, _, port = emulated
+    t_emu = emu.emulator.t
+    while emu.emulator.t - t_emu < 0.5:  # on its schedule again (an earlier test stalls it)
+        time.sleep(0.1)
+    twin = connect(port, tmp_path)
+    trips = emu.emulator.interlock.trips
+    events: list[str] = []
+    try:
+        t = CFG.sampling.t_s
+        twin.read(0.0)
+        for j in range(0, 40):
+            if j:
+                twin.read(j * t)
+            if j == 10:
+                time.sleep(1.3)  # between reading sample 10 and answering it
+            twin.apply(np.full(6, 0.5), j * t)
+            events += twin.drain_events()
+        time.sleep(0.2)
+        events += twin.drain_events()
+    finally:
+        twin.close()
+    assert emu.emulator.interlock.trips == trips + 1
+    behind = [e for e in events if "fell behind" in e]
+    assert behind and "t = 1.0 s" in behind[0] and "lamp command went out" in behind[0], events
+    late_s = float(behind[0].split("went out ")[1].split(" s")[0])
+    assert 1.1 <= late_s <= 1.5, behind  # 1.3 s of stall, less what was left of the period
+    assert any(e.startswith("the twin caught up with the furnace") for e in events), events
+    off = [e for e in events if "switched its lamps off" in e]
+    assert off and any("enabled its lamps again" in e for e in events), events
+    t_off = float(off[0].split("t = ")[1].split(" s")[0])
+    assert 1.9 <= t_off <= 2.4, off  # 1 s of silence after the command for sample 9 (t = 0.9 s), within a tick
+    assert twin.overdue_samples >= 2
+
+
 MAPPING = """object = "Plant/Annealer"
 [nodes]
 TC1 = {node = "Sensors/TE101", offset = -273.15}

@@ -1,14 +1,25 @@
 """Hardware in the loop on loopback, in real time: ``furnace-twin emulate`` in a subprocess, the twin through
 its REST API (or ``furnace-twin run``) on the small furnace.
 
-* a closed-loop run over OPC UA tracks like the same scenario in process (steady mean error within 0.2 %
-  of the setpoint of the in-process figure), reports no truth and stores what a real furnace gives;
+* a closed-loop run over OPC UA in real time runs the in-process loop, sample for sample, until timing
+  disturbs it (a late sample, the twin behind the furnace's clock, the furnace holding an older command or
+  switching its lamps off), reports no truth and stores what a real furnace gives; undisturbed, its metrics
+  are the in-process ones (the exact comparison itself is ``test_opcua_lockstep.py``);
 * the emulator killed mid-run: the run ends ``plant_lost`` and its data stays readable;
 * the twin killed mid-run: the emulator's lamps go off within 1.5 s (its watchdog interlock).
 
 All real-time tests live in this file (``--dist loadfile`` keeps them on one worker, one after another)
 and carry the ``realtime`` mark; their timeouts are generous for a loaded 2-core machine, their pass
 criteria are not timing figures.
+
+Why the real-time comparison is not a tolerance on the metric: a CI run gave 1.301 % steady mean error over
+OPC UA against 1.587 % in process with no late sample.  Such a run is what a stalled twin gives: a run whose
+loop thread stalled 1.4 s at t = 5 s (injected) counted no late sample (the samples waited in the buffer and
+were taken complete), the emulator's watchdog switched the lamps off for the last 0.4 s of the stall, and
+the run ended at 1.176 %; in process, lamps off after a stall of 1.2-1.3 s in the heat-up give 1.22-1.40 %
+(and a one-sample command delay, the guess of commit 4ebefe4, 1.603 %: the other way).  Such runs now report
+it (the twin fell behind, the furnace switched its lamps off), and this test compares the loop up to the
+first disturbance, exactly.
 """
 
 from __future__ import annotations
@@ -22,31 +33,20 @@ import time
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from opcua_helpers import Peek, child_env, emulator_process, small_config_file
+from opcua_helpers import Peek, child_env, emulator_process, small_config_file, twin_app, wait_status
 
-from backend.app import create_app
-from backend.settings import Settings
 from twin.config import small_config
-from twin.furnace.opcua.options import OpcUaOptions
 from twin.runs.loop import ClosedLoop
-from twin.scenario import PAPER_ESTIMATOR, Scenario
+from twin.scenario import Scenario
 
 pytestmark = pytest.mark.realtime
 
 CFG = small_config()
 # 700 K in t_E = 12 s, a 24 s run (steady window 18..24 s): the lamps heat at full power, then hold
 BASE = {"reference": {"setpoint": 700.0, "t_E": 12.0}, "duration": 24.0, "seed": 4, "tc_noise": 1.0}
-
-
-def wait_status(c: TestClient, run_id: str, statuses: set[str], timeout: float) -> dict:
-    end = time.monotonic() + timeout
-    body: dict = {}
-    while time.monotonic() < end:
-        body = c.get(f"/api/runs/{run_id}").json()
-        if body["status"] in statuses:
-            return body
-        time.sleep(0.1)
-    raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")
+#: 0.01 % of the setpoint, for a run that nothing disturbed: it ran the in-process loop (the transport is exact,
+#: test_opcua_lockstep.py), so only rounding may differ
+UNDISTURBED = 1e-4
 
 
 def wait_running_for(c: TestClient, run_id: str, t: float, timeout: float) -> dict:
@@ -62,46 +62,57 @@ def wait_running_for(c: TestClient, run_id: str, t: float, timeout: float) -> di
 
 
 def app(tmp_path, **opcua) -> TestClient:
-    settings = Settings(data_dir=tmp_path / "data", flush_interval_s=0.5,
-                        opcua=OpcUaOptions(**{"reconnect_s": 2.0, "connect_timeout_s": 10.0, **opcua}))
-    return TestClient(create_app(settings, CFG), base_url="http://127.0.0.1")
+    return twin_app(tmp_path, CFG, **opcua)
 
 
-# The paper's estimator for the comparison: what is compared is the transport.  The default estimator
-# calibrates in the 12 s hold, which amplifies the real-time path's small differences: in process, seeds
-# 4 / 5 / 6 end at 1.80 / 1.77 / 1.57 % steady mean error with it, 1.587 % / 1.614 % (seeds 4 / 5) with the
-# paper's, which the run over OPC UA met to 0.001 % (1.587 %) when it was the default.
-TRACK = {**BASE, "estimator": PAPER_ESTIMATOR.model_dump()}
-#: Over OPC UA the lamp commands reach the emulator's plant up to a sample later or earlier than in process
-#: (its own real-time clock), and this short run's steady window starts 6 s after a full-power heat-up:
-#: with the paper's estimator and no late sample, CI runs gave 1.301 % and 1.588 % against 1.587 % in
-#: process.  0.5 % of the setpoint (3.5 K) allows that spread; the late-sample and reading checks below
-#: catch a transport that loses readings.
-TRACK_TOLERANCE = 0.005
+def first_disturbance(npz, applied: list[int]) -> tuple[int, str]:
+    """The first sample from which the run over OPC UA may differ from the in-process one, and why: a sample with
+    a missing reading; the twin's first sample repeated (its first command reached the furnace a period late,
+    so the specimen was loaded a sample later); the furnace computing sample k + 1 with another command than
+    the twin's for sample k (watchdog k + 1; -1: lamps off)."""
+    n = len(npz["t"])
+    late = np.flatnonzero(np.any(npz["tc_status"] == 2, axis=1))
+    candidates = [(int(late[0]), "a late sample")] if late.size else []
+    if n > 1 and np.array_equal(npz["tc"][1], npz["tc"][0]):
+        candidates.append((1, "the specimen was loaded a sample late"))
+    for k, w in enumerate(applied[: n - 1]):
+        if w != k + 1:
+            candidates.append((k + 1, f"sample {k + 1} computed with command {w}, not {k + 1}"))
+            break
+    return min(candidates, default=(n, "nothing"))
 
 
-def test_closed_loop_over_opcua_tracks_like_in_process(tmp_path, small_radiation) -> None:
-    in_process = ClosedLoop(CFG, Scenario.model_validate(TRACK), small_radiation)
+def test_closed_loop_over_opcua_runs_the_in_process_loop_until_timing_disturbs_it(tmp_path, small_radiation) -> None:
+    in_process = ClosedLoop(CFG, Scenario.model_validate(BASE), small_radiation)
     list(in_process.run())
-    reference = in_process.metrics()
+    reference, ref = in_process.metrics(), in_process.timeseries()
 
     # the emulated furnace: same seed and TC noise, its specimen at 300 K until the twin starts (as in process)
-    (tmp_path / "plant.json").write_text(json.dumps(TRACK))
+    (tmp_path / "plant.json").write_text(json.dumps(BASE))
     with emulator_process(tmp_path, "--scenario", str(tmp_path / "plant.json"), "--load-on-first-client") as emu, \
             app(tmp_path) as c:
-        r = c.post("/api/runs", json={**TRACK, "plant": {"kind": "opcua", "endpoint": emu.url}})
+        r = c.post("/api/runs", json={**BASE, "plant": {"kind": "opcua", "endpoint": emu.url}})
         assert r.status_code == 201, r.text
         run_id = r.json()["id"]
         body = wait_status(c, run_id, {"finished", "error", "plant_lost"}, timeout=180)
         assert body["status"] == "finished", body["error"]
         metrics = c.get(f"/api/runs/{run_id}/metrics").json()
         npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
+    stats = json.loads(emu.stats.read_text())
+    events = [str(e) for e in npz["event_text"]]
 
-    setpoint = BASE["reference"]["setpoint"]
+    j0, why = first_disturbance(npz, stats["applied"])
     steady, steady_ref = metrics["mean_error_steady_max"], reference["mean_error_steady_max"]
     print(f"steady mean error over OPC UA {100 * steady:.3f} %, in process {100 * steady_ref:.3f} % of the setpoint; "
-          f"{metrics['late_samples']} late samples")  # shown with -rP
-    assert abs(steady - steady_ref) <= TRACK_TOLERANCE, (steady * setpoint, steady_ref * setpoint)
+          f"{metrics['late_samples']} late samples; the in-process loop up to sample {j0} ({why}); interlock trips "
+          f"{stats['interlock_trips']}")  # shown with -rP
+    # up to the first disturbance the furnace ran the twin's loop: the same readings and commands as in process
+    assert np.array_equal(npz["tc"][:j0], ref["tc"][:j0], equal_nan=True)
+    assert np.max(np.abs(npz["u"][:j0] - ref["u"][:j0]), initial=0.0) == 0.0
+    if j0 == len(npz["t"]):  # nothing disturbed the run: its figures are the in-process ones
+        assert abs(steady - steady_ref) <= UNDISTURBED, (steady, steady_ref)
+    if stats["interlock_trips"]:  # the furnace switched its lamps off during the run: the twin says so
+        assert any("switched its lamps off" in e for e in events), events
     for key in ("true_inhomogeneity_steady", "true_mean_error_steady_max", "field_estimation_error_steady_max"):
         assert metrics[key] is None, key  # a furnace over OPC UA has no truth
     assert "field_true" not in npz.files

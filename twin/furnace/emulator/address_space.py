@@ -3,7 +3,13 @@ by default, or the one a mapping file describes, so the twin's mapping can be tr
 
 Written values pass through setters: lamp-group setpoints are clamped to 0..1 (in twin units; a furnace
 unit from the mapping's scale and offset), the drive's amplitude to 0..eta_max and its period to
-1..600 s; a new watchdog value goes to the interlock.  TCs, ``Eta`` and ``LampsEnabled`` are read-only.
+1..600 s; a new watchdog value goes to the interlock.  TCs, ``Eta``, ``LampsEnabled`` and ``LockStep`` are
+read-only.  What a client is told about its write (OPC UA Part 4, 7.34): ``GoodClamped`` when a value was
+clamped, ``BadNotWritable`` for a read-only node; a value written with a Bad status is ignored (a watchdog
+written Bad does not count as a sign of life, a setpoint written Bad switches its group off).
+
+A NodeId of the map may name its namespace by URI (``nsu=urn:lab:annealer;s=TE101``): the emulator
+registers that namespace and serves the node there, as a third-party server would.
 """
 
 from __future__ import annotations
@@ -67,6 +73,8 @@ class AddressSpace:
         self.on_watchdog = on_watchdog
         self.nodes: dict[str, Any] = {}
         self.kinds: dict[str, Kind] = {}
+        self._names: dict[Any, str] = {}  # NodeId -> twin name
+        self._clamped: set[Any] = set()  # NodeIds whose value the write being served clamped
 
     async def _namespace(self, index_needed: int | None = None) -> int:
         uri = self.map.namespace or NAMESPACE
@@ -74,6 +82,18 @@ class AddressSpace:
         while index_needed is not None and index_needed > len(await self.server.get_namespace_array()) - 1:
             await self.server.register_namespace(f"{NAMESPACE}:ns{len(await self.server.get_namespace_array())}")
         return idx
+
+    async def _node_id(self, text: str) -> Any:
+        """The NodeId a map entry names; a namespace given by URI (``nsu=``) is registered and used by index."""
+        from asyncua import ua
+
+        parsed = ua.NodeId.from_string(text)
+        uri = getattr(parsed, "NamespaceUri", None)
+        if uri:
+            idx = int(await self.server.register_namespace(uri))
+            return ua.NodeId(parsed.Identifier, ua.Int16(idx), parsed.NodeIdType)
+        await self._namespace(parsed.NamespaceIndex)
+        return ua.NodeId(parsed.Identifier, parsed.NamespaceIndex, parsed.NodeIdType)
 
     async def _object(self, parent: Any, path: tuple[str, ...], idx: int) -> Any:
         from asyncua import ua
@@ -88,8 +108,9 @@ class AddressSpace:
             node = found if found is not None else await node.add_object(idx, name)
         return node
 
-    async def build(self, T0: float, drive: OscillationSpec) -> None:
-        """Create every node of the map (T0: the TCs' first value, K; ``drive``: the drive's settings)."""
+    async def build(self, T0: float, drive: OscillationSpec, *, lock_step: bool = False) -> None:
+        """Create every node of the map (T0: the TCs' first value, K; ``drive``: the drive's settings) and the
+        emulator's own ``LockStep`` (Boolean, read-only: the furnace's clock advances only on the client's writes)."""
         from asyncua import ua
 
         idx = await self._namespace()
@@ -100,8 +121,7 @@ class AddressSpace:
             vt = getattr(ua.VariantType, kind.variant)
             value = ua.Variant(_furnace_value(spec, kind, kind.initial), vt)
             if spec.node_id is not None:
-                nodeid = ua.NodeId.from_string(spec.node_id)
-                await self._namespace(nodeid.NamespaceIndex)
+                nodeid = await self._node_id(spec.node_id)
                 node = await furnace.add_variable(nodeid, ua.QualifiedName(name, nodeid.NamespaceIndex), value,
                                                   varianttype=vt)
             else:
@@ -112,6 +132,39 @@ class AddressSpace:
                 await node.set_writable()
                 self.server.set_attribute_value_setter(node.nodeid, self._setter(name))
             self.nodes[name] = node
+            self._names[node.nodeid] = name
+        self.nodes[names.LOCK_STEP] = await furnace.add_variable(idx, names.LOCK_STEP, bool(lock_step),
+                                                                 varianttype=ua.VariantType.Boolean)
+        self._names[self.nodes[names.LOCK_STEP].nodeid] = names.LOCK_STEP
+        self._answer_writes()
+
+    def _answer_writes(self) -> None:
+        """Wrap the server's Write service so that a client learns what became of its values: ``BadNotWritable``
+        for a read-only node (asyncua answers ``BadUserAccessDenied``), ``GoodClamped`` for a clamped value."""
+        from asyncua import ua
+
+        service = self.server.iserver.attribute_service
+        write = service.write
+
+        async def answered(params: Any, *args: Any, **kwargs: Any) -> list[Any]:
+            self._clamped.clear()
+            results = await write(params, *args, **kwargs)
+            out = []
+            for wv, res in zip(params.NodesToWrite, results, strict=True):
+                name = self._names.get(wv.NodeId)
+                if (name is not None and res.value == ua.StatusCodes.BadUserAccessDenied
+                        and wv.AttributeId == ua.AttributeIds.Value and not self._writable(name)):
+                    res = ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotWritable))
+                elif res.is_good() and wv.NodeId in self._clamped:
+                    res = ua.StatusCode(ua.UInt32(ua.StatusCodes.GoodClamped))
+                out.append(res)
+            return out
+
+        service.write = answered
+
+    def _writable(self, name: str) -> bool:
+        kind = self.kinds.get(name)
+        return kind is not None and kind.writable
 
     def _setter(self, name: str) -> Callable[[Any, Any, Any], None]:
         from asyncua import ua
@@ -119,15 +172,22 @@ class AddressSpace:
         spec, kind = self.map.nodes[name], self.kinds[name]
 
         def store(node: Any, attr: Any, dv: Any) -> None:
-            raw = dv.Value.Value if dv.Value is not None else None
+            raw: Any = dv.Value.Value if dv.Value is not None else None
+            bad = (dv.StatusCode is not None and not dv.StatusCode.is_good()) or raw is None
             if name == names.WATCHDOG:
-                value: Any = int(raw or 0)
+                if bad:  # no sign of life: the interlock keeps its time
+                    log.warning("watchdog written with status %s: ignored", dv.StatusCode)
+                    return
+                value: Any = int(raw)
                 self.on_watchdog(value)
             elif kind.variant == "Boolean":
-                value = bool(raw)
+                value = bool(raw) if not bad else False
             else:
-                twin = spec.to_twin(float(raw)) if raw is not None else math.nan
-                value = spec.to_furnace(self._limit(name, twin))
+                twin = spec.to_twin(float(raw)) if not bad else math.nan
+                limited = self._limit(name, twin)
+                if math.isfinite(twin) and limited != twin:
+                    self._clamped.add(node.nodeid)
+                value = spec.to_furnace(limited)
             node.attributes[attr].value = ua.DataValue(ua.Variant(value, getattr(ua.VariantType, kind.variant)),
                                                        SourceTimestamp=utc_now(), ServerTimestamp=utc_now())
 

@@ -41,6 +41,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="allow --security none on an address other than loopback (anyone on the network "
                         "could then drive the lamps)")
     p.add_argument("--stats", default=None, help="write the timing figures (JSON) here when stopped")
+    p.add_argument("--lock-step", action="store_true",
+                   help="no wall clock: the furnace advances one sample per watchdog value a client writes, with the "
+                        "setpoints of that write (the twin then runs exactly as in process: for testing the "
+                        "transport; the node LockStep says so)")
     p.add_argument("--load-on-first-client", action="store_true",
                    help="keep the specimen at its initial temperature until a client first enables the lamps "
                         "(a cold specimen loaded when the twin starts); by default it sits in the furnace from the "
@@ -96,7 +100,8 @@ def emulate_command(cfg: FurnaceConfig, args: Any) -> int:
     emulator = FurnaceEmulator(furnace, endpoint, node_map, eta_max=cfg.oscillation.eta_max,
                                T0=cfg.specimen.initial_temperature, security=args.security,
                                cert_dir=certificate_dir(args.data_dir), users=users,
-                               load_on_first_client=args.load_on_first_client)
+                               load_on_first_client=args.load_on_first_client,
+                               clock="lock-step" if getattr(args, "lock_step", False) else "realtime")
 
     async def main() -> None:
         stop = asyncio.Event()

@@ -43,6 +43,11 @@ class WatchdogInterlock:
         self._value: int | None = None
         self._changed_at = -math.inf
 
+    @property
+    def value(self) -> int | None:
+        """The watchdog value last written (``None`` before any)."""
+        return self._value
+
     def feed(self, value: int, now: float) -> bool:
         """A client wrote the watchdog; True if the value changed (the lamps are then enabled)."""
         if value == self._value:

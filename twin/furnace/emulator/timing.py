@@ -1,10 +1,15 @@
-"""What the emulator measures of a hardware-in-the-loop run: its sample period, the client's, and the latency
-from a TC reading to the lamp write that answers it.
+"""What the emulator measures of a hardware-in-the-loop run: its sample period, the client's, the latency
+from a TC reading to the lamp write that answers it, and which write each sample of the furnace was
+computed with.
 
 Per tick the emulator notes when it took the TC readings (monotonic s); per new watchdog value, when the
 write arrived.  A write answers the newest tick before it, so the latency is ``write - reading``; a tick
 that no write followed before the next tick is *unanswered* (the client was late or silent for it),
-counted between the client's first and last write.
+counted between the client's first and last write.  Per sample the furnace advanced, ``applied`` keeps the
+watchdog value of the write whose setpoints it held (-1: lamps off by the interlock, or before any write):
+a client that answers every sample in time is seen there as 1, 2, 3, ... (its write for sample k carries
+k + 1), and every sample computed with an older write, or with the lamps off, shows where the furnace did
+not run the loop the client computed.
 
 Example
 -------
@@ -43,12 +48,17 @@ class TimingRecord:
     def __init__(self) -> None:
         self.readings: deque[float] = deque(maxlen=MAX_EVENTS)
         self.writes: deque[float] = deque(maxlen=MAX_EVENTS)
+        self.applied: deque[int] = deque(maxlen=MAX_EVENTS)
 
     def reading(self, t: float) -> None:
         self.readings.append(t)
 
     def write(self, t: float) -> None:
         self.writes.append(t)
+
+    def step(self, watchdog: int | None) -> None:
+        """The furnace advanced one sample with the setpoints of the write carrying ``watchdog`` (``None``: off)."""
+        self.applied.append(-1 if watchdog is None else int(watchdog))
 
     def summary(self) -> dict[str, Any]:
         """Periods and latencies as p50 / p99 / max in ms."""
@@ -70,4 +80,5 @@ class TimingRecord:
             "twin_period_ms": percentiles_ms(np.diff(w)),
             "tc_to_lamp_ms": percentiles_ms(latency),
             "unanswered_readings": int(unanswered),
+            "applied": [int(a) for a in self.applied],
         }

@@ -2,6 +2,10 @@
 
 :func:`resolve` returns every node of the map with the variant type its value is written with; a node the
 server does not have is a :class:`MissingNodes` error that names each one and where it was looked for.
+A NodeId that names its namespace by URI (``nsu=urn:lab:annealer;s=TE101``) is resolved through the
+server's namespace array at every connection (a server may number its namespaces differently after a
+restart); a URI the server does not have is named in the error.  Optional nodes (the emulator's
+``LockStep``) are looked for below the furnace object and left out when absent.
 """
 
 from __future__ import annotations
@@ -9,7 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from twin.furnace.opcua.nodes import NodeMap
+from twin.furnace.opcua.nodes import LOCK_STEP, NodeMap
+
+OPTIONAL = (LOCK_STEP,)  # looked for below the furnace object, not required
 
 
 class MissingNodes(LookupError):
@@ -57,6 +63,21 @@ class _Browser:
         return node
 
 
+async def node_id(client: Any, text: str) -> Any:
+    """The NodeId ``text`` names on this server: ``ns=``/``i=``/``s=``... as written, ``nsu=URI;...`` with URI
+    looked up in the server's namespace array (:class:`MissingNodes` if it has no such namespace)."""
+    from asyncua import ua
+
+    parsed = ua.NodeId.from_string(text)
+    uri = getattr(parsed, "NamespaceUri", None)
+    if not uri:
+        return ua.NodeId(parsed.Identifier, parsed.NamespaceIndex, parsed.NodeIdType)
+    array = await client.get_namespace_array()
+    if uri not in array:
+        raise MissingNodes(f"the server has no namespace {uri!r} for {text} (it has {', '.join(array)})")
+    return ua.NodeId(parsed.Identifier, array.index(uri), parsed.NodeIdType)
+
+
 async def _exists(node: Any) -> bool:
     from asyncua import ua
 
@@ -78,7 +99,11 @@ async def resolve(client: Any, node_map: NodeMap) -> dict[str, ResolvedNode]:
     missing: list[str] = []
     for name, spec in node_map.nodes.items():
         if spec.node_id is not None:
-            node = client.get_node(spec.node_id)
+            try:
+                node = client.get_node(await node_id(client, spec.node_id))
+            except MissingNodes as exc:
+                missing.append(f"{node_map.describe(name)}: {exc}")
+                continue
             node = node if await _exists(node) else None
         else:
             node = await browser.walk(furnace, spec.path or ())
@@ -88,4 +113,8 @@ async def resolve(client: Any, node_map: NodeMap) -> dict[str, ResolvedNode]:
         found[name] = ResolvedNode(node, await node.read_data_type_as_variant_type())
     if missing:
         raise MissingNodes("the furnace lacks " + "; ".join(missing))
+    for name in OPTIONAL:
+        node = await browser.walk(furnace, (name,))
+        if node is not None:
+            found[name] = ResolvedNode(node, await node.read_data_type_as_variant_type())
     return found

@@ -12,6 +12,15 @@ the subscription fills a :class:`twin.furnace.opcua.samples.SampleBuffer`, and t
 A link lost for longer than ``options.reconnect_s`` raises :class:`twin.furnace.interface.FurnaceLost`
 from :meth:`read`; so does a furnace that sends no readings that long.  :meth:`close` commands the lamps
 off where the link still allows.  A real furnace has no true field (:meth:`true_field` is ``None``).
+
+What the run's events learn from the furnace (:meth:`OpcUaFurnace.drain_events`): a link lost and restored;
+the furnace's own interlock switching the lamps off (``LampsEnabled`` false while the twin was driving them)
+and on again; the twin itself falling behind the furnace's clock (samples taken after their deadline: the
+commands for them reached the furnace late or not at all, which no missing reading would show).
+
+A furnace that says it runs in lock step (the emulator's ``LockStep`` node, ``furnace-twin emulate
+--lock-step``) computes each sample only after the twin's write: then no wall-clock deadline applies and the
+run over OPC UA is the in-process run, sample for sample (:mod:`twin.furnace.opcua.samples`).
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
@@ -97,15 +107,29 @@ class OpcUaFurnace:
         self._tc_positions = np.asarray(cfg.tc_positions(tc4), float)
         self._buffer = SampleBuffer(self.t_s, len(CHANNELS), late_s=options.late_fraction * self.t_s)
         self._io = _IoThread(f"opcua-{endpoint}")
-        self._link = FurnaceLink(LinkSettings(endpoint, options, Path(cert_dir), self.node_map, CHANNELS),
-                                 self._buffer.add)
+        self._link = FurnaceLink(LinkSettings(endpoint, options, Path(cert_dir), self.node_map, CHANNELS,
+                                              watched=(names.LAMPS_ENABLED,)), self._buffer.add, self._on_state)
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta = 0.0
         self._pending_write: concurrent.futures.Future[None] | None = None
         self.writes_failed = 0
+        self.lock_step = False
+        self._events: deque[str] = deque()  # the furnace's own reports (beside the link's), for the run's events
+        self._last_write = -math.inf  # monotonic s
+        self._read_started = -math.inf  # monotonic s
+        self._taken_late = 0.0  # s after its deadline the last sample was taken
+        self._lamps: tuple[bool, float] | None = None  # (LampsEnabled, source time) as the furnace last said
+        self._lamps_driven = False  # the twin has enabled the lamps with its watchdog
+        self._lamps_off_at: float | None = None  # run time at which the furnace switched them off
+        self._behind = 0  # samples in the current run of samples the twin answered late
+        self.overdue_samples = 0  # samples answered late (taken after their deadline, or command after the next)
         try:
             self._io.call(self._link.open(), timeout=4 * options.connect_timeout_s)
+            if names.LOCK_STEP in self._link.nodes:
+                said = self._io.call(self._link.read([names.LOCK_STEP]), timeout=options.connect_timeout_s)
+                self.lock_step = bool(said[names.LOCK_STEP])
+                self._buffer.lock_step = self.lock_step
             start = self._io.call(self._link.read([names.WATCHDOG]), timeout=options.connect_timeout_s)
             self._watchdog_modulus = _COUNTER_MODULUS.get(self._link.nodes[names.WATCHDOG].variant_type.name, 2**15)
             self._watchdog = int(start[names.WATCHDOG] or 0) % self._watchdog_modulus
@@ -138,7 +162,10 @@ class OpcUaFurnace:
         link = self._link
         if link.lost:
             raise FurnaceLost(link.lost_reason or "the link to the furnace is lost")
-        silent = time.monotonic() - max(self._buffer.last_arrival, link.connected_since)
+        # in lock step the furnace only answers: it is silent if it does not answer while the twin waits for it
+        waited = max(self._last_write, self._read_started) if self.lock_step else -math.inf
+        heard = max(self._buffer.last_arrival, link.connected_since, waited)
+        silent = time.monotonic() - heard
         if link.state == "connected" and silent > max(self.options.reconnect_s, 2 * self.t_s):
             link.declare_lost(f"no readings from the furnace for {silent:.1f} s (allowed: "
                               f"{self.options.reconnect_s:g} s)")
@@ -147,12 +174,14 @@ class OpcUaFurnace:
     def read(self, t: float) -> Readings:
         """Sample j = round(t / t_s) of the furnace's clock; ``read(0.0)`` starts that clock."""
         j = int(round(t / self.t_s))
+        self._read_started = time.monotonic()
         self._check_alive()
         if j == 0:
             if self._buffer.anchor(ANCHOR_TIMEOUT_S) is None:
                 raise FurnaceLost(f"the furnace at {self.endpoint} sent no readings within {ANCHOR_TIMEOUT_S:g} s")
-        slot = self._buffer.take(j, give_up=lambda: self._link.lost)
+        slot = self._buffer.take(j, give_up=self._give_up)
         self._check_alive()
+        self._taken_late = self._buffer.overdue_s
         origin = self._buffer.origin or 0.0
         values, stamps, status = np.full(4, np.nan), np.full(4, np.nan), []
         for i in range(4):
@@ -168,6 +197,56 @@ class OpcUaFurnace:
             self._eta = eta.value
         return Readings(values=values, timestamps=stamps, status=tuple(status))
 
+    def _give_up(self) -> bool:
+        """Stop waiting for a sample: the link is lost, or (lock step: no deadline) the furnace fell silent."""
+        if self._link.lost:
+            return True
+        if not self.lock_step:
+            return False
+        try:
+            self._check_alive()
+        except FurnaceLost:
+            return True
+        return False
+
+    def _note_behind(self, j: int, taken_late: float, sent_late: float) -> None:
+        """Sample j was taken after its deadline, or its command sent after the next sample was due: the furnace
+        held an older command meanwhile (its watchdog may have switched the lamps off).  An event when a run of
+        such samples starts, and when the twin has caught up."""
+        t = j * self.t_s
+        if taken_late > 0.0 or sent_late > 0.0:
+            self.overdue_samples += 1
+            self._behind += 1
+            if self._behind == 1:
+                what = (f"the sample was taken {taken_late:.2f} s after it was due" if taken_late > 0.0 else
+                        f"its lamp command went out {sent_late:.2f} s after the next sample was due")
+                self._events.append(f"the twin fell behind the furnace at t = {t:.1f} s: {what} (the furnace held "
+                                    "an older command meanwhile)")
+        elif self._behind:
+            self._events.append(f"the twin caught up with the furnace at t = {t:.1f} s after {self._behind} "
+                                f"samples late ({self.overdue_samples} in this run)")
+            self._behind = 0
+
+    def _on_state(self, name: str, value: Any, good: bool, source_s: float) -> None:
+        """``LampsEnabled`` as the furnace reports it (the OPC UA thread): its interlock turning the lamps off
+        while the twin drives them, and on again."""
+        if name != names.LAMPS_ENABLED or not good or value is None:
+            return
+        on = bool(value)
+        origin = self._buffer.origin
+        t = (source_s - origin) if origin is not None else math.nan
+        if on and not self._lamps_driven and self._last_write > -math.inf:
+            self._lamps_driven = True
+        elif not on and self._lamps_driven and self._lamps_off_at is None and (self._lamps is None or self._lamps[0]):
+            self._lamps_off_at = t
+            self._events.append(f"the furnace switched its lamps off at t = {t:.1f} s (LampsEnabled false: its "
+                                "watchdog interlock did not see the twin's writes in time)")
+        elif on and self._lamps_off_at is not None:
+            self._events.append(f"the furnace enabled its lamps again at t = {t:.1f} s after "
+                                f"{t - self._lamps_off_at:.2f} s off")
+            self._lamps_off_at = None
+        self._lamps = (on, source_s)
+
     def apply(self, u: Array, t: float) -> None:
         """Write the six setpoints (clipped to [0, 1]) and the next watchdog value; do not wait for the answer."""
         if self._link.state != "connected" or self._link.lost:
@@ -179,7 +258,13 @@ class OpcUaFurnace:
         self._watchdog = (self._watchdog + 1) % self._watchdog_modulus
         values = {g: float(np.clip(v, 0.0, 1.0)) for g, v in zip(self._groups, np.asarray(u, float), strict=True)}
         values[names.WATCHDOG] = self._watchdog
+        self._last_write = time.monotonic()
         self._pending_write = self._io.submit(self._link.write(values))
+        if not self.lock_step and self._buffer.origin is not None:
+            j = int(round(t / self.t_s))
+            sent_late = max(self._last_write - self._buffer.due(j + 1), 0.0)
+            self._note_behind(j, self._taken_late, sent_late)
+            self._taken_late = 0.0
 
     def motion(self, t: float) -> Motion:
         return Motion(eta=self._eta, oscillation=self._oscillation, since=self._since)
@@ -200,8 +285,9 @@ class OpcUaFurnace:
 
     def drain_events(self) -> tuple[str, ...]:
         out = []
-        while self._link.events:
-            out.append(self._link.events.popleft())
+        for queue in (self._link.events, self._events):
+            while queue:
+                out.append(queue.popleft())
         return tuple(out)
 
     def close(self) -> None:

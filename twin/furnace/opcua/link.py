@@ -33,7 +33,14 @@ log = logging.getLogger(__name__)
 
 RETRY_S = 0.5  # between reconnection attempts
 QUEUE_SIZE = 10  # per monitored item: readings of several samples in one publish are all kept
+# The subscription publishes every 10 ms (a fifth of the default lateness margin, 0.5 t_s) and sends a keep-alive
+# after 5 empty intervals (50 ms here, 0.5 s on a server with a 100 ms floor such as node-opcua), so that a
+# quiet furnace (lock step while the twin plans, a stalled controller) is still heard from: asyncua recreates
+# a subscription it has not heard from for 1 s.  (Interval 0, "as fast as possible", sends no keep-alive.)
+PUBLISHING_INTERVAL_MS = 10.0
+KEEPALIVE_COUNT = 5
 ReadingSink = Callable[[int, float, bool, float, float], None]
+StateSink = Callable[[str, Any, bool, float], None]  # name, value, good, source time (unix s)
 
 
 class FurnaceUnavailable(ConnectionError):
@@ -47,6 +54,7 @@ class LinkSettings:
     cert_dir: Path
     node_map: NodeMap
     channels: tuple[str, ...]  # the twin names read as samples, in channel order
+    watched: tuple[str, ...] = ()  # twin names whose changes are reported as they come (not part of a sample)
 
 
 def explain(exc: BaseException, s: LinkSettings) -> str:
@@ -91,17 +99,24 @@ def _unix_s(stamp: Any) -> float | None:
 
 
 class _Readings:
-    """The subscription handler: a data change becomes one reading of its channel, in twin units."""
+    """The subscription handler: a data change becomes one reading of its channel, in twin units (or, for a
+    watched node, a state change)."""
 
-    def __init__(self, channel_of: Mapping[Any, int], specs: Sequence[Any], sink: ReadingSink) -> None:
+    def __init__(self, channel_of: Mapping[Any, int], specs: Sequence[Any], sink: ReadingSink,
+                 watched: Mapping[Any, str] | None = None, state_sink: StateSink | None = None) -> None:
         self.channel_of, self.specs, self.sink = channel_of, specs, sink
+        self.watched, self.state_sink = dict(watched or {}), state_sink
 
     def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
         ch = self.channel_of.get(node.nodeid)
-        if ch is None:
-            return
         dv = data.monitored_item.Value
         good = dv.StatusCode is None or dv.StatusCode.is_good()
+        if ch is None:
+            name = self.watched.get(node.nodeid)
+            if name is not None and self.state_sink is not None:
+                stamp = _unix_s(dv.SourceTimestamp) or _unix_s(dv.ServerTimestamp) or time.time()
+                self.state_sink(name, val, good, stamp)
+            return
         try:
             value = self.specs[ch].to_twin(float(val)) if good and val is not None else math.nan
         except (TypeError, ValueError):
@@ -116,9 +131,10 @@ class _Readings:
 class FurnaceLink:
     """One furnace over OPC UA, on the current event loop."""
 
-    def __init__(self, settings: LinkSettings, on_reading: ReadingSink) -> None:
+    def __init__(self, settings: LinkSettings, on_reading: ReadingSink, on_state: StateSink | None = None) -> None:
         self.s = settings
         self._on_reading = on_reading
+        self._on_state = on_state
         self._client: Any = None
         self.nodes: dict[str, ResolvedNode] = {}
         self.state = "new"  # the transport: new, connected, reconnecting, down (not restored), closed
@@ -140,15 +156,23 @@ class FurnaceLink:
             nodes = await resolve(client, self.s.node_map)
             channel_of = {nodes[name].node.nodeid: i for i, name in enumerate(self.s.channels)}
             specs = [self.s.node_map.nodes[name] for name in self.s.channels]
-            sub = await client.create_subscription(0, _Readings(channel_of, specs, self._on_reading))
+            watched = {nodes[name].node.nodeid: name for name in self.s.watched if name in nodes}
+            params = ua.CreateSubscriptionParameters(RequestedPublishingInterval=PUBLISHING_INTERVAL_MS,
+                                                     RequestedLifetimeCount=KEEPALIVE_COUNT * 30,
+                                                     RequestedMaxKeepAliveCount=KEEPALIVE_COUNT,
+                                                     MaxNotificationsPerPublish=0, PublishingEnabled=True,
+                                                     Priority=0)
+            sub = await client.create_subscription(params, _Readings(channel_of, specs, self._on_reading, watched,
+                                                                     self._on_state))
             trigger = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
+            monitored = [*self.s.channels, *(name for name in self.s.watched if name in nodes)]
             requests = [ua.MonitoredItemCreateRequest(
                 ItemToMonitor=ua.ReadValueId(NodeId=nodes[name].node.nodeid, AttributeId=ua.AttributeIds.Value),
                 MonitoringMode=ua.MonitoringMode.Reporting,
                 RequestedParameters=ua.MonitoringParameters(ClientHandle=10_000 + i, SamplingInterval=0.0,
                                                             QueueSize=QUEUE_SIZE, DiscardOldest=True,
                                                             Filter=trigger))
-                for i, name in enumerate(self.s.channels)]
+                for i, name in enumerate(monitored)]
             for result in await sub.create_monitored_items(requests):
                 if isinstance(result, ua.StatusCode):
                     result.check()

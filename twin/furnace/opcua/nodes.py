@@ -44,6 +44,9 @@ from typing import Any
 TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
 ETA, OSCILLATION_ENABLED, AMPLITUDE, PERIOD = "Eta", "OscillationEnabled", "Amplitude", "Period"
 WATCHDOG, LAMPS_ENABLED = "Watchdog", "LampsEnabled"
+#: optional, the emulator's own (``furnace-twin emulate --lock-step``): true when the furnace's clock advances
+#: one sample per watchdog value the client writes, instead of in real time
+LOCK_STEP = "LockStep"
 LAMP_GROUPS_OBJECT = "LampGroups"
 FURNACE_OBJECT = "Furnace"
 

@@ -11,7 +11,14 @@ so sample j collects the readings taken within half a period of t_j = j t_s on t
 its deadline is when sample j is due on this machine's clock plus ``late_s``, where "due" is learnt from
 the arrivals themselves (the smallest recent arrival delay, so neither clock offset nor slow drift
 between the two machines matters).  A channel without a reading by then is missing for that sample
-(the estimator then predicts without it); a reading that arrives later is counted and dropped.
+(the estimator then predicts without it); a reading that arrives later is counted and dropped.  A sample
+that was complete in time but taken only after its deadline (the twin itself fell behind: its commands
+for it reach the furnace late) is noted in :attr:`SampleBuffer.overdue_s`.
+
+In **lock step** (``lock_step=True``: the furnace computes a sample only after the twin's write, so no
+wall-clock deadline applies) :meth:`SampleBuffer.anchor` takes the newest reading however old, and
+:meth:`SampleBuffer.take` waits for sample j as long as ``give_up()`` allows; once its first reading has come,
+the other channels have ``late_s`` to follow.
 
 Example
 -------
@@ -59,8 +66,10 @@ class SampleBuffer:
     late_s : how long after it is due a sample may still come (s)
     """
 
-    def __init__(self, t_s: float, n_channels: int, late_s: float, *, delay_window: int = 100) -> None:
+    def __init__(self, t_s: float, n_channels: int, late_s: float, *, delay_window: int = 100,
+                 lock_step: bool = False) -> None:
         self.t_s, self.n, self.late_s = float(t_s), int(n_channels), float(late_s)
+        self.lock_step = bool(lock_step)
         self._cond = threading.Condition()
         self._origin: float | None = None  # source time of t = 0 (unix s)
         self._slots: dict[int, list[Reading | None]] = {}
@@ -69,6 +78,7 @@ class SampleBuffer:
         self._taken = -1  # the last sample handed out
         self.last_arrival = -math.inf
         self.dropped_late = 0  # readings that came after their sample was handed out (or far ahead)
+        self.overdue_s = 0.0  # how long after its deadline the last sample was taken (0: in time)
 
     # ---- the OPC UA thread
     def add(self, channel: int, value: float, good: bool, source_s: float, arrival: float) -> None:
@@ -107,7 +117,7 @@ class SampleBuffer:
 
             def fresh() -> bool:
                 r = newest()
-                return r is not None and r.arrival >= t_call - self.t_s
+                return r is not None and (self.lock_step or r.arrival >= t_call - self.t_s)
 
             if not fresh():
                 self._cond.wait_for(fresh, timeout=timeout_s)
@@ -140,16 +150,19 @@ class SampleBuffer:
         ``give_up()`` is polled while waiting (e.g. the link is lost for good)."""
         if self._origin is None:
             raise RuntimeError("the run clock has not started: anchor() first")
-        deadline = self.due(j) + self.late_s
+        deadline = math.inf if self.lock_step else self.due(j) + self.late_s
         with self._cond:
             while True:
                 slot = self._slots.get(j)
                 if slot is not None and all(r is not None for r in slot):
                     break
+                if self.lock_step and slot is not None:  # the sample came: its other channels come with it
+                    deadline = min(r.arrival for r in slot if r is not None) + self.late_s
                 remaining = deadline - now()
                 if remaining <= 0 or give_up():
                     break
                 self._cond.wait(timeout=min(remaining, 0.05))
+            self.overdue_s = max(now() - deadline, 0.0) if slot is not None and None not in slot else 0.0
             slot = self._slots.pop(j, None) or [None] * self.n
             self._taken = max(self._taken, j)
             for k in [k for k in self._slots if k <= j]:
