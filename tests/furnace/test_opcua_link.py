@@ -100,17 +100,23 @@ def test_address_space_clamps_and_watchdog_as_a_client_sees_them(emulated) -> No
             assert dv.Value.VariantType == ua.VariantType.Double and dv.SourceTimestamp is not None
         assert peek.nodes["Watchdog"].read_data_type_as_variant_type() == ua.VariantType.UInt32
         assert set(GROUPS) <= set(peek.nodes)
-        for node in ("TC1", "Eta", "LampsEnabled"):  # read-only for clients
-            with pytest.raises(ua.UaStatusCodeError):
-                peek.nodes[node].write_value(ua.Variant(1.0 if node != "LampsEnabled" else True))
+        for node in ("TC1", "Eta", "LampsEnabled", "LockStep"):  # read-only for clients, and told so
+            with pytest.raises(ua.uaerrors.BadNotWritable):
+                peek.nodes[node].write_value(ua.Variant(1.0 if node not in ("LampsEnabled", "LockStep") else True))
+        assert peek.value("LockStep") is False  # this emulator keeps real time
         peek.nodes["T1h"].write_value(ua.Variant(1.7, ua.VariantType.Double))
         peek.nodes["T2h"].write_value(ua.Variant(-0.3, ua.VariantType.Double))
         peek.nodes["T3h"].write_value(ua.Variant(0.42, ua.VariantType.Double))
         assert (peek.value("T1h"), peek.value("T2h"), peek.value("T3h")) == (1.0, 0.0, 0.42)
         peek.nodes["Amplitude"].write_value(ua.Variant(0.9, ua.VariantType.Double))
         assert peek.value("Amplitude") == pytest.approx(CFG.oscillation.eta_max)  # the drive's limit
-        # no client has written the watchdog: lamps off; a new value turns them on; 1 s of silence trips
+        # no client has written the watchdog: lamps off; a value written with a Bad status is no sign of life
         assert peek.value("LampsEnabled") is False
+        peek.nodes["Watchdog"].write_attribute(ua.AttributeIds.Value, ua.DataValue(
+            ua.Variant(7, ua.VariantType.UInt32), StatusCode=ua.StatusCode(ua.UInt32(ua.StatusCodes.BadSensorFailure))))
+        time.sleep(0.3)
+        assert peek.value("LampsEnabled") is False and emu.emulator.interlock.value is None
+        # a new value turns them on; 1 s of silence trips
         t_fed = time.monotonic()
         peek.nodes["Watchdog"].write_value(ua.Variant(1, ua.VariantType.UInt32))
         time.sleep(0.3)
@@ -283,12 +289,15 @@ MAPPING = """object = "Plant/Annealer"
 [nodes]
 TC1 = {node = "Sensors/TE101", offset = -273.15}
 TC2 = {node = "ns=3;s=TE102", offset = -273.15}
+TC3 = {node = "nsu=urn:lab:annealer;s=PLC1.TE103", offset = -273.15}
 T1h = {node = "Heating/Zone1", scale = 100.0}
 Watchdog = "Safety/Heartbeat"
 """
 
 
 def test_a_furnace_with_other_node_names_through_a_mapping_file(tmp_path) -> None:
+    from asyncua import ua
+
     mapping = tmp_path / "lab.toml"
     mapping.write_text(MAPPING)
     port = free_port()
@@ -311,5 +320,10 @@ def test_a_furnace_with_other_node_names_through_a_mapping_file(tmp_path) -> Non
             raw = space.server.read_attribute_value(space.nodes["T1h"].nodeid).Value.Value
             assert raw == pytest.approx(50.0) and space.value("T1h") == pytest.approx(0.5)  # percent on the wire
             assert emu.emulator.interlock.lamps_enabled  # the watchdog under its own name
+            # the nsu= node is served in its own namespace, and the twin found it there, not in namespace 0
+            te103 = space.nodes["TC3"].nodeid
+            uris = space.server.read_attribute_value(ua.NodeId(ua.ObjectIds.Server_NamespaceArray))
+            assert te103.NamespaceIndex > 0 and uris.Value.Value[te103.NamespaceIndex] == "urn:lab:annealer"
+            assert twin._link.nodes["TC3"].node.nodeid == te103
         finally:
             twin.close()
