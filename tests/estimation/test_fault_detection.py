@@ -145,6 +145,27 @@ def test_dropout_is_declared_after_half_a_second_and_the_tc_left_out(detector_fa
     assert det.excluded.tolist() == [False, True, False] and np.isnan(y[1])
 
 
+def test_no_tc_drops_out_while_none_of_them_reads(detector_factory) -> None:
+    """An outage (the furnace's server restarted, the link down: every TC missing at once) is not three
+    dropouts: a TC left out for it would come back only once it agreed with an estimate that ran blind, which
+    after an outage it does not (issue 24: TC1-3 never used again after a 6.3 s outage).  A TC that still gives
+    nothing when the others read again has dropped out, since the outage began."""
+    det, rng = detector_factory(), np.random.default_rng(2)
+    for j in range(10):
+        det.screen(0.1 * j, _readings(rng), ("good",) * 4)
+    found = []
+    for j in range(10, 40):  # 3 s without any reading
+        y = det.screen(0.1 * j, np.full(4, np.nan), ("missing",) * 4)
+        found += det.update(0.1 * j, np.zeros(1), None)
+    assert found == [] and not det.excluded.any() and np.isnan(y).all()
+    values = _readings(rng)
+    values[2] = np.nan  # the readings return, TC3's does not
+    y = det.screen(4.0, values, ("good", "good", "missing", "good"))
+    found += det.update(4.0, np.zeros(1), None)
+    assert [(d.target, d.kind, round(d.onset, 6)) for d in found] == [("TC3", "dropout", 1.0)]
+    assert det.excluded.tolist() == [False, False, True] and np.isfinite(y[:2]).all()
+
+
 def test_stuck_needs_one_second_of_one_value_and_noise_never_is(detector_factory) -> None:
     det, rng = detector_factory(), np.random.default_rng(1)
     for j in range(200):  # noisy readings: never the same value twice

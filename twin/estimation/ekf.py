@@ -156,9 +156,10 @@ def ekf_update(state: EKFState, y: ArrayLike, C: Array, R: Array, gate: float,
         reasons = ("",) * len(yv)
     else:
         reasons = tuple("" if ok else ("missing" if not fin else "gated") for ok, fin in zip(used, finite, strict=True))
-        for i, why in enumerate(reasons):
+        for i, why in enumerate(reasons):  # a missing reading is the loop's to report (once per outage, not 30/s)
             if why:
-                log.warning("EKF: TC%d reading %s left out (%s, %.1f sigma)", i + 1, yv[i], why, normalized[i])
+                log.log(logging.DEBUG if why == "missing" else logging.WARNING, "EKF: TC%d reading %s left out "
+                        "(%s, %.1f sigma)", i + 1, yv[i], why, normalized[i])
     if not used.any():
         return state, UpdateInfo(innov, normalized, used, reasons, S_full, np.zeros_like(PCt_full))
     if all_used:  # the normal case: no fancy indexing (it costs more than the algebra at p = 3)

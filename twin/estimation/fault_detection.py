@@ -5,9 +5,12 @@ innovations, covariance and gain (:class:`twin.estimation.ekf.UpdateInfo`) and t
 controller commanded -- never the furnace's injected faults.  Per sample:
 
 1. :meth:`FaultDetector.screen` (before the EKF update) runs the reading tests on TC1..TC4:
-   *dropout*: the TC gave no usable reading for ``dropout_s``; *stuck*: it repeated the same
-   value (to ``flat_tolerance`` K) for ``flat_s`` while real readings carry noise and follow the
-   plate.  It returns TC1..3 for the EKF with the TCs found faulty left out (NaN).
+   *dropout*: the TC gave no usable reading for ``dropout_s`` while another of TC1..3 did; *stuck*:
+   it repeated the same value (to ``flat_tolerance`` K) for ``flat_s`` while real readings carry noise
+   and follow the plate.  It returns TC1..3 for the EKF with the TCs found faulty left out (NaN).
+   When none of TC1..3 reads, no TC is found to have dropped out: the furnace or the link to it is out
+   (an outage, which the loop reports), and a TC left out for it would not be used again when the
+   readings return (they are re-admitted only once they agree with an estimate that ran blind).
 2. :meth:`FaultDetector.update` (after the update) runs the innovation tests: finite-memory GLR
    tests (:mod:`twin.estimation.glr`) of an offset or a drift on each of TC1..3 and of a lost
    fraction of each lamp group's power ("power that the model cannot explain"), on the readings of
@@ -158,9 +161,10 @@ class FaultDetector:
         self._y = y
         if self._reported[3] and usable[3] and self._flat[3] == 0:
             self._reported[3] = ""  # TC4 (never left out: it only validates) reads again
+        isolating = bool(usable[:N_EKF_TCS].any())  # a dropout is one TC's only while another reads
         for i, name in enumerate(TC_NAMES):
             kind, since = "", 0
-            if self._unusable[i] >= self._n(s.dropout_s):
+            if self._unusable[i] >= self._n(s.dropout_s) and isolating:
                 kind, since = "dropout", self._unusable[i] - 1  # samples since the first one without a reading
             elif self._flat[i] + 1 >= self._n(s.flat_s):
                 kind, since = "stuck", self._flat[i]

@@ -147,6 +147,14 @@ class Furnace(Protocol):
         ...
 
 
+def delivered(furnace: Furnace, u: Array, t: float) -> Array:
+    """The group powers the furnace is believed to hold from run time ``t`` when the twin commanded ``u``: the
+    furnace's own account if it keeps one (``delivered(u, t)``: a furnace over OPC UA that the twin cannot reach
+    holds none once its watchdog has switched the lamps off), else ``u``."""
+    own = getattr(furnace, "delivered", None)
+    return np.asarray(own(u, t) if callable(own) else u, float)
+
+
 @runtime_checkable
 class FaultInjectable(Protocol):
     """A furnace that faults can be injected into (the simulated one: :mod:`twin.furnace.simulated.faults`).

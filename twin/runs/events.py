@@ -59,6 +59,8 @@ def event_level(text: str) -> str:
     'warn'
     >>> event_level("link to the furnace restored after 1.2 s")
     'info'
+    >>> event_level("blind since t = 4.0 s: ..."), event_level("thermocouple readings used again after 2.0 s blind")
+    ('warn', 'info')
 
     A fault the twin detected is a warning; a fault injected into the simulated furnace is information:
 
@@ -69,7 +71,8 @@ def event_level(text: str) -> str:
         return "info"
     if text.startswith("fault detected"):
         return "warn"
-    return "warn" if re.search(r"failed| late:|\blost\b", text) else "info"
+    return "warn" if re.search(r"failed| late:|\blost\b|^blind since|fell behind|lamps off|lamps were off", text) \
+        else "info"
 
 
 def event_arrays(events: Iterable[RunEvent]) -> dict[str, Any]:

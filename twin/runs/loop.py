@@ -56,7 +56,7 @@ import numpy as np
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
-from twin.furnace.interface import FaultInjectable, Furnace, Readings
+from twin.furnace.interface import FaultInjectable, Furnace, Readings, delivered
 from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
 from twin.physics.grid import cell_centers
@@ -64,6 +64,7 @@ from twin.runs.estimators import RunEstimators
 from twin.runs.fault_ride_through import FaultRideThrough
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.live_changes import LiveChanges, _Plan
+from twin.runs.outage import BlindWatch, blind_cause, run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
 from twin.scenario import OscillationSpec, Reference, Scenario
@@ -170,6 +171,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self.record = RunRecord(header, has_truth=self._has_truth, field_every=field_every,
                                 full_rate_until=full_rate_until, capacity=capacity)
         self._guard = DivergenceGuard.for_furnace(cfg, scenario.tc_noise)  # stops a diverging estimate
+        self.blindness = BlindWatch(self.t_s)  # samples without a reading in the estimate: degraded, and why
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
 
@@ -182,6 +184,15 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
     def paced_by_furnace(self) -> bool:
         """The furnace keeps real time: :meth:`step` waits for its samples (no speed applies)."""
         return bool(self.furnace.realtime)
+
+    @property
+    def degraded(self) -> bool:
+        """No thermocouple reading has reached the estimate for a while (:mod:`twin.runs.outage`)."""
+        return self.blindness.blind_since is not None
+
+    def ending(self, end: str, error: str | None = None) -> tuple[str, str | None]:
+        """``(status, status_reason)`` of this run ending as ``end`` (:func:`twin.runs.outage.run_ending`)."""
+        return run_ending(end, error, self.blindness, max(self.j - 1, 0) * self.t_s)
 
     @property
     def replanning(self) -> bool:
@@ -208,6 +219,10 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             theta_prior = self.estimator.state.theta.copy()
             holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
             theta, shadow = self.estimators.update(y, learn=holding)  # eq. 13 (faulty readings gated inside)
+            info = self.estimator.last_info
+            used = info is not None and bool(np.any(info.used))  # blind: no TC reading reached the estimate
+            why = "" if used else blind_cause(readings.status, self.detector.excluded, info)
+            self._events.extend(self.blindness.note(t, used, why))
             self._on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
             due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
             if due is not None:  # the controller's model follows the calibration (re-planned like a change)
@@ -229,6 +244,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
                 true_mean=None if truth is None else float(self.fillet.mean(truth)),
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
+                blind_since=self.blindness.blind_since,
                 **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
             problem = self._guard.check(snap, left_out=self.detector.excluded)
@@ -240,8 +256,9 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             # the furnace holds u over [t_j, t_j + t_s]; the EKF predicts (eq. 14)
             self.furnace.apply(snap.u, t)
             c0 = time.perf_counter()
-            # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed)
-            self.estimators.predict(self._lamp_gains * snap.u, eta)
+            # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed; none
+            # once a furnace out of reach has switched them off, as its watchdog does)
+            self.estimators.predict(self._lamp_gains * delivered(self.furnace, snap.u, t), eta)
             self.detector.predict(snap.u, theta, self.estimator.state.theta, self.estimator.parameter_jacobian)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1

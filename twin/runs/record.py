@@ -101,6 +101,7 @@ class Snapshot:
     shadow_field_hat: Array | None = None
     tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
     late_samples: int = 0  # samples of the run so far with a reading that did not come in time
+    blind_since: float | None = None  # run time since which no TC reading reached the estimate (degraded)
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,7 @@ T = TypeVar("T")
 CHANNELS = (*names.TC_NAMES, names.ETA)  # what one sample holds, in this order
 ANCHOR_TIMEOUT_S = 2.0  # the furnace must publish within this long when a run starts
 WRITE_TIMEOUT_S = 1.0  # a blocking write (oscillation, lamps off) waits at most this long
+FURNACE_WATCHDOG_S = 1.0  # product.md: a furnace switches its lamps off when the watchdog is still this long
 _COUNTER_MODULUS = {"Byte": 2**8, "SByte": 2**7, "UInt16": 2**16, "Int16": 2**15, "UInt32": 2**32,
                     "Int32": 2**31, "UInt64": 2**64, "Int64": 2**63}
 
@@ -119,7 +120,7 @@ class OpcUaFurnace:
         self._last_write = -math.inf  # monotonic s
         self._read_started = -math.inf  # monotonic s
         self._taken_late = 0.0  # s after its deadline the last sample was taken
-        self._lamps: tuple[bool, float] | None = None  # (LampsEnabled, source time) as the furnace last said
+        self._lamps: tuple[bool, float] | None = None  # (LampsEnabled, connection it came on) as last said
         self._lamps_driven = False  # the twin has enabled the lamps with its watchdog
         self._lamps_off_at: float | None = None  # run time at which the furnace switched them off
         self._behind = 0  # samples in the current run of samples the twin answered late
@@ -235,17 +236,22 @@ class OpcUaFurnace:
         on = bool(value)
         origin = self._buffer.origin
         t = (source_s - origin) if origin is not None else math.nan
+        relinked = self._lamps is not None and self._lamps[1] != self._link.connected_since
+        was_on = self._lamps is None or self._lamps[0]
         if on and not self._lamps_driven and self._last_write > -math.inf:
             self._lamps_driven = True
-        elif not on and self._lamps_driven and self._lamps_off_at is None and (self._lamps is None or self._lamps[0]):
+        elif not on and self._lamps_driven and self._lamps_off_at is None and (was_on or relinked):
             self._lamps_off_at = t
-            self._events.append(f"the furnace switched its lamps off at t = {t:.1f} s (LampsEnabled false: its "
-                                "watchdog interlock did not see the twin's writes in time)")
+            self._events.append(
+                f"the furnace's lamps were off when the link returned at t = {t:.1f} s (LampsEnabled false: its "
+                "watchdog, or a restarted server)" if relinked else
+                f"the furnace switched its lamps off at t = {t:.1f} s (LampsEnabled false: its watchdog interlock "
+                "did not see the twin's writes in time)")
         elif on and self._lamps_off_at is not None:
             self._events.append(f"the furnace enabled its lamps again at t = {t:.1f} s after "
                                 f"{t - self._lamps_off_at:.2f} s off")
             self._lamps_off_at = None
-        self._lamps = (on, source_s)
+        self._lamps = (on, self._link.connected_since)
 
     def apply(self, u: Array, t: float) -> None:
         """Write the six setpoints (clipped to [0, 1]) and the next watchdog value; do not wait for the answer."""
@@ -265,6 +271,15 @@ class OpcUaFurnace:
             sent_late = max(self._last_write - self._buffer.due(j + 1), 0.0)
             self._note_behind(j, self._taken_late, sent_late)
             self._taken_late = 0.0
+
+    def delivered(self, u: Array, t: float) -> Array:
+        """What the furnace holds from t: ``u`` while the twin's writes reach it; with the link down, the last
+        command until the furnace's watchdog switches the lamps off (``FURNACE_WATCHDOG_S`` after the last write,
+        product.md's interlock), then nothing."""
+        if self._link.state == "connected" and not self._link.lost:
+            return np.asarray(u, float)
+        held = time.monotonic() - self._last_write < FURNACE_WATCHDOG_S
+        return np.asarray(u, float) if held else np.zeros(len(self._groups))
 
     def motion(self, t: float) -> Motion:
         return Motion(eta=self._eta, oscillation=self._oscillation, since=self._since)
