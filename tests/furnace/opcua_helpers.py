@@ -92,7 +92,7 @@ def emulator_process(folder: Path, *args: str, port: int | None = None, env: dic
     folder.mkdir(parents=True, exist_ok=True)
     port = port or free_port()
     log, stats = folder / f"emulator-{port}.log", folder / f"emulator-{port}.json"
-    cmd = [sys.executable, "-m", "twin.cli", "--config", str(small_config_file(folder)), "emulate",
+    cmd = [sys.executable, "-m", "furnace_twin.cli", "--config", str(small_config_file(folder)), "emulate",
            "--endpoint", endpoint(port), "--data-dir", str(folder / "emulator-data"), "--stats", str(stats), *args]
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env or child_env(), cwd=folder)

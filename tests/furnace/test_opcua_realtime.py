@@ -25,7 +25,7 @@ from fastapi.testclient import TestClient
 from opcua_helpers import Peek, child_env, emulator_process, small_config_file
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from twin.config import small_config
 from twin.furnace.opcua.options import OpcUaOptions
 from twin.runs.loop import ClosedLoop
@@ -146,7 +146,7 @@ def test_twin_killed_mid_run_the_emulator_turns_the_lamps_off(tmp_path) -> None:
         scenario = tmp_path / "twin.json"
         scenario.write_text(json.dumps({**BASE, "duration": 300.0, "plant": {"kind": "opcua", "endpoint": emu.url}}))
         twin = subprocess.Popen(
-            [sys.executable, "-m", "twin.cli", "--config", str(small_config_file(tmp_path)), "run",
+            [sys.executable, "-m", "furnace_twin.cli", "--config", str(small_config_file(tmp_path)), "run",
              "--scenario", str(scenario), "--out", str(tmp_path / "out")],
             stdout=subprocess.DEVNULL, stderr=open(tmp_path / "twin.log", "wb"),
             env=child_env(FURNACE_TWIN_DATA_DIR=str(tmp_path / "twin-data")), cwd=tmp_path)
