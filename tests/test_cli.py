@@ -42,8 +42,8 @@ def test_run_and_simulate_check_the_scenario_against_the_furnace(tmp_path, capsy
     """A furnace whose eta_max (30 mm) is below the default amplitude (3 L_h = 48 mm): an amplitude above it
     is a clear error before any run; a scenario that leaves the amplitude out takes the furnace's."""
     from twin.config import load_config
-    from twin.experiments.run import load_scenario
     from twin.limits import furnace_name, scenario_limits
+    from twin.user_files import load_scenario
 
     low = tmp_path / "low_stroke.toml"
     low.write_text('base = "default"\n[oscillation]\neta_max = 0.03\n')

@@ -42,6 +42,7 @@ import rerun.blueprint as rrb
 from backend.streaming.frames import SnapshotLike
 from twin.config import FurnaceConfig
 from twin.model.tables import PARAMETERS
+from twin.physics.fillet import fillet_box
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +139,7 @@ class RecordingSink:
             rec.set_time(TIMELINE, duration=t)
 
     def _log_static(self, tc_positions: list[tuple[float, float]]) -> None:
-        x0, x1, y0, y1 = self.cfg.fillet
+        x0, x1, y0, y1 = fillet_box(self.cfg.specimen.length, self.cfg.specimen.width)
         corners = [self._cell(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0))]
         self._log("field/fillet", rr.LineStrips2D([corners], colors=[255, 255, 255], radii=0.08),
                      static=True)

@@ -23,15 +23,13 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Protocol
 
-from pydantic import ValidationError
-
 from twin.config import FurnaceConfig
 from twin.furnace.interface import FurnaceLost
-from twin.limits import ScenarioLimits, furnace_name, scenario_limits
+from twin.limits import furnace_name, scenario_limits
 from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
 from twin.runs.record import Snapshot, save_arrays
-from twin.scenario import Scenario, parse_scenario
+from twin.user_files import ScenarioError, load_scenario
 
 log = logging.getLogger(__name__)
 
@@ -47,42 +45,6 @@ class SnapshotSink(Protocol):
 
 
 SinkFactory = Callable[[Path, ClosedLoop], SnapshotSink]
-
-
-class ScenarioError(ValueError):
-    """A scenario file or option is invalid; the message says which field and why."""
-
-
-def load_scenario(
-    path: str | None,
-    limits: ScenarioLimits | None = None,
-    *,
-    oscillate: bool = False,
-    tc4: tuple[float, float] | None = None,
-) -> Scenario:
-    """Read a scenario JSON file (or the defaults) and apply command-line overrides; the scenario is
-    checked against the furnace's ``limits`` (``twin.limits``; default: the default furnace's) and
-    fields the file leaves out take that furnace's defaults."""
-    data: dict[str, Any] = {}
-    if path is not None:
-        try:
-            data = json.loads(Path(path).read_text())
-        except OSError as exc:
-            raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
-        except json.JSONDecodeError as exc:
-            raise ScenarioError(f"scenario {path} is not valid JSON: {exc}") from None
-        if not isinstance(data, dict):
-            raise ScenarioError(f"scenario {path} must be a JSON object")
-    if oscillate:
-        data["oscillation"] = {**data.get("oscillation", {}), "enabled": True}
-    if tc4 is not None:
-        data["tc4"] = list(tc4)
-    try:
-        return parse_scenario(data, limits)
-    except ValidationError as exc:
-        msgs = [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg'].removeprefix('Value error, ')}"
-                for e in exc.errors()]
-        raise ScenarioError("invalid scenario:\n  " + "\n  ".join(msgs)) from None
 
 
 def execute_run(

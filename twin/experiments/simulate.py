@@ -32,6 +32,7 @@ from pydantic import ValidationError
 
 from twin.config import FurnaceConfig
 from twin.limits import furnace_name, scenario_limits
+from twin.physics.fillet import fillet_box
 from twin.scenario import MAX_DURATION_S, OscillationSpec, parse_oscillation, parse_scenario
 
 log = logging.getLogger(__name__)
@@ -236,7 +237,7 @@ def simulate_command(cfg: FurnaceConfig, args: Any) -> int:
         plant.y_centers,
         s.length,
         s.width,
-        cfg.fillet,
+        fillet_box(s.length, s.width),
         positions,
         title=title,
     )

@@ -8,6 +8,7 @@ from fastapi import APIRouter
 
 from backend.api.deps import ManagerDep, ScenarioBody
 from backend.api.schemas import FurnaceOut, LampGroupOut
+from twin.physics.fillet import fillet_box
 from twin.physics.grid import cell_centers
 from twin.scenario import parse_scenario
 
@@ -25,7 +26,7 @@ def furnace(manager: ManagerDep) -> FurnaceOut:
         name=limits.furnace,
         L_s=s.length, W_s=s.width, B_s=s.thickness, nx=s.nx, ny=s.ny,
         x=x.tolist(), y=y.tolist(),
-        fillet=list(cfg.fillet),
+        fillet=list(fillet_box(s.length, s.width)),
         eta_max=cfg.oscillation.eta_max,
         t_s=cfg.sampling.t_s,
         lamps={side: {"count": a.count, "pitch": a.pitch, "distance": a.distance}

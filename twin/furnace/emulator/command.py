@@ -77,13 +77,13 @@ def _install_stop(stop: asyncio.Event) -> None:
 
 
 def emulate_command(cfg: FurnaceConfig, args: Any) -> int:
-    from twin.experiments.run import ScenarioError, load_scenario
     from twin.furnace.emulator.server import FurnaceEmulator
     from twin.furnace.opcua.nodes import MappingError, load_mapping
     from twin.furnace.opcua.options import certificate_dir
     from twin.furnace.simulated import SimulatedFurnace
     from twin.limits import scenario_limits
     from twin.radiation import radiation_model
+    from twin.user_files import ScenarioError, load_scenario
 
     try:
         endpoint, users = check_arguments(args)
