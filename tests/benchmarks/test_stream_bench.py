@@ -9,10 +9,11 @@ import math
 import pytest
 
 import benchmarks.stream as bench
+from twin.config import small_config
 
 
-def test_stream_bench_keys(small_cfg) -> None:
-    r = bench.stream_bench(small_cfg, n_clients=3, client_fps=20.0, load_s=3.0, background_runs=1, long_sim_s=20.0,
+def test_stream_bench_keys() -> None:
+    r = bench.stream_bench(small_config(), n_clients=3, client_fps=20.0, load_s=3.0, background_runs=1, long_sim_s=20.0,
                            baseline_sim_s=5.0, bare_sim_s=5.0)
     assert set(r) >= {"stream_clients", "stream_fps_min", "stream_fps_min_wall", "stream_latency_p95_ms",
                       "stream_latency_max_ms", "background_rtf_min", "rss_growth_mb", "rss_baseline_mb",

@@ -11,7 +11,7 @@ import json
 import pytest
 
 from twin.config import small_config
-from twin.runs import campaign as camp
+from twin.experiments import campaign as camp
 from twin.scenario import PAPER_ESTIMATOR
 
 

@@ -46,8 +46,8 @@ FILLET_Y = (0.2, 0.8)
 def fillet_box(L_s: float, W_s: float) -> tuple[float, float, float, float]:
     """The fillet Omega_f as (x0, x1, y0, y1) in m on a specimen of length L_s and width W_s (m).
 
-    >>> fillet_box(0.2, 0.1)
-    (0.05, 0.15, 0.02, 0.08)
+    >>> fillet_box(4.0, 10.0)
+    (1.0, 3.0, 2.0, 8.0)
     """
     return (FILLET_X[0] * L_s, FILLET_X[1] * L_s, FILLET_Y[0] * W_s, FILLET_Y[1] * W_s)
 
