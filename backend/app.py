@@ -1,11 +1,11 @@
 """The FastAPI app factory: REST API, websocket stream, dashboard page, optional viser view.
 
-One router per resource (``backend/routes``): health, furnace, runs, run files, run stream, design
+One router per resource (``backend/api/routes``): health, furnace, runs, run files, run stream, design
 studies and the dashboard's page and files.  Everything they need comes from typed dependencies
-(``backend/deps.py``); the run manager is the only way to the runs.
+(``backend/api/deps.py``); the run manager is the only way to the runs.
 
 >>> import tempfile
->>> from backend.settings import Settings
+>>> from backend.core.settings import Settings
 >>> from twin.config import small_config
 >>> app = create_app(Settings(data_dir=tempfile.mkdtemp()), small_config())
 >>> sorted(set(app.openapi()["paths"]) & {"/api/runs", "/api/health"})
@@ -23,12 +23,12 @@ from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
-from backend.errors import validation_error
-from backend.recovery import recover_interrupted
-from backend.repository import RunRepository
-from backend.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
-from backend.run_changes import ChangeCancelled, ChangeRejected
-from backend.run_manager import (
+from backend.api.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
+from backend.core.errors import validation_error
+from backend.core.security import SecurityMiddleware
+from backend.core.settings import Settings
+from backend.runs.changes import ChangeCancelled, ChangeRejected
+from backend.runs.manager import (
     InsufficientStorage,
     LimitExceeded,
     PlantBusy,
@@ -39,10 +39,10 @@ from backend.run_manager import (
     RunNotFound,
     TooManyRuns,
 )
-from backend.run_worker import LoopFactory
-from backend.security import SecurityMiddleware
-from backend.settings import Settings
-from backend.study_manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
+from backend.runs.worker import LoopFactory
+from backend.storage.recovery import recover_interrupted
+from backend.storage.repository import RunRepository
+from backend.studies.manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 from twin.config import FurnaceConfig, load_config
 from twin.limits import scenario_limits
 
@@ -117,7 +117,7 @@ def create_app(
         app.state.rerun_url = None
         viewer = None
         if rerun and settings.rerun_web_port:
-            from backend.rerun_viewer import RerunWebViewer
+            from backend.streaming.rerun_viewer import RerunWebViewer
 
             viewer = RerunWebViewer(settings.rerun_web_port, settings.rerun_grpc_port,
                                     server_memory_limit=settings.rerun_server_memory_limit,
@@ -146,7 +146,7 @@ def create_app(
         description="Live digital twin of the oscillating infrared annealing furnace "
         "(Jadachowski, Steinboeck, Kugi, CEP 78, 2018): runs, live stream, recordings.",
         lifespan=lifespan,
-        docs_url=None,  # backend/routes/docs.py: the same pages with their scripts from an installed package
+        docs_url=None,  # backend/api/routes/docs.py: the same pages with their scripts from an installed package
         redoc_url=None,
     )
     app.state.settings = settings

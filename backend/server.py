@@ -14,8 +14,8 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from backend.app import create_app
-from backend.loop_factory import DefaultLoopFactory
-from backend.settings import DEFAULT_DATA_DIR, Settings, is_loopback
+from backend.core.settings import DEFAULT_DATA_DIR, Settings, is_loopback
+from backend.runs.loop_factory import DefaultLoopFactory
 from twin.config import FurnaceConfig
 from twin.limits import furnace_name
 

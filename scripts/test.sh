@@ -10,7 +10,7 @@ if ! command -v chromium >/dev/null 2>&1; then
     echo "test.sh: chromium is missing (apt-get install chromium); browser tests will be skipped" >&2
   fi
 fi
-.venv/bin/ruff check twin backend tests
+.venv/bin/ruff check twin backend benchmarks furnace_twin tests
 .venv/bin/mypy
 export MPLBACKEND=Agg
 .venv/bin/python -m pytest -n 2 --dist loadfile -q "$@"

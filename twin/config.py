@@ -509,14 +509,6 @@ class FurnaceConfig(_Section):
                 g[self.lamps.lamp_index(lamp), j] = 1.0
         return g
 
-    @property
-    def fillet(self) -> tuple[float, float, float, float]:
-        """Fillet Omega_f as (x0, x1, y0, y1) in m: 0.25-0.75 L_s, 0.2-0.8 W_s (paper section 3.1)."""
-        from twin.physics.fillet import FILLET_X, FILLET_Y
-
-        s = self.specimen
-        return (FILLET_X[0] * s.length, FILLET_X[1] * s.length, FILLET_Y[0] * s.width, FILLET_Y[1] * s.width)
-
     def tc_positions(self, tc4: RelPoint | None = None) -> list[tuple[float, float]]:
         """Absolute TC positions (m) xi_1..xi_4, optionally with another TC4."""
         rel = list(self.sensors.relative_positions)

@@ -132,7 +132,7 @@ class ScenarioLimits:
     seed: Range = SEED
 
     def capped(self, max_duration_s: float, max_speed: float) -> ScenarioLimits:
-        """The same limits within a server's run length and speed (``backend.settings``)."""
+        """The same limits within a server's run length and speed (``backend.core.settings``)."""
         d, s = self.duration, self.speed
         return dataclasses.replace(
             self,

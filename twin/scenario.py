@@ -262,7 +262,7 @@ class OpcUaPlant(_Model):
     @field_validator("endpoint")
     @classmethod
     def _endpoint(cls, v: str) -> str:
-        from twin.furnace.opcua.endpoints import parse_endpoint
+        from twin.endpoints import parse_endpoint
 
         return parse_endpoint(v).url
 

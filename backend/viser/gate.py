@@ -26,7 +26,7 @@ from typing import Any
 import viser
 import websockets.asyncio.server as ws_server
 
-from backend.security import allowed_host, same_origin, token_ok
+from backend.core.security import allowed_host, same_origin, token_ok
 
 log = logging.getLogger(__name__)
 

@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 import viser
 
-from backend.frames import SnapshotLike
+from backend.streaming.frames import SnapshotLike
 from twin.config import FurnaceConfig
 from twin.physics.geometry import display_meshes, specimen_plate_mesh
 

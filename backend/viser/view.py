@@ -24,10 +24,10 @@ from typing import Any
 import viser
 from pydantic import ValidationError
 
-from backend.frames import SnapshotLike
-from backend.messages import field_path, plain_errors
-from backend.repository import ACTIVE_STATUSES, RunRow
-from backend.run_manager import RunManager
+from backend.core.messages import field_path, plain_errors
+from backend.runs.manager import RunManager
+from backend.storage.repository import ACTIVE_STATUSES, RunRow
+from backend.streaming.frames import SnapshotLike
 from backend.viser.controls import AUTO, Controls, build_controls
 from backend.viser.gate import ClientAccess, guarded_viser_server
 from backend.viser.scene import FurnaceScene

@@ -6,7 +6,7 @@ sys.path.insert(0, "tests/backend")
 from conftest import fake_factory, wait_status
 from fastapi.testclient import TestClient
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from twin.config import small_config
 cfg = small_config()
 tmp = Path(tempfile.mkdtemp())
@@ -50,7 +50,7 @@ orig = rec.save_arrays
 def counting(path, arrays, *, compress=True):
     orig(path, arrays, compress=compress); written.append(Path(path).stat().st_size)
 rec.save_arrays = counting
-import backend.run_files as rf; rf.save_arrays = counting
+import backend.storage.run_files as rf; rf.save_arrays = counting
 try:
     import twin.runs.series_store as ss; ss.save_arrays = counting
 except ImportError:

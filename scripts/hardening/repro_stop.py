@@ -2,7 +2,7 @@
 import os, signal, subprocess, sys, tempfile, time
 import httpx
 sys.path.insert(0, "backend")
-from backend.threaded_server import free_port
+from backend.core.threaded_server import free_port
 tree = os.getcwd()
 SERVE = ("import logging, sys\nfrom backend.server import serve\nfrom twin.config import small_config\n"
          "sys.exit(serve(small_config(), host='127.0.0.1', port={port}, viser_port=0, data_dir={data!r}))\n")

@@ -8,8 +8,8 @@ from fastapi.testclient import TestClient
 from viser._messages import GuiUpdateMessage, ViewerCameraMessage
 from websockets.sync.client import connect
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
 from twin.config import small_config
 def enc(m): return msgspec.msgpack.encode(m.as_serializable_dict())
 s = Settings(data_dir=Path(tempfile.mkdtemp()), viser_port=free_port(), api_token="view-token-0123456789")

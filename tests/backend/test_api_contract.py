@@ -15,10 +15,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import fake_factory, stream_frames, wait_status
 
-TOKEN = "s3cret-token-0123456"  # at least backend.settings.MIN_TOKEN_LENGTH characters
+TOKEN = "s3cret-token-0123456"  # at least backend.core.settings.MIN_TOKEN_LENGTH characters
 
 
 def make_client(tmp_path: Path, cfg, factory=None, **settings) -> TestClient:

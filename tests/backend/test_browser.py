@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import ThreadedServer, free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import ThreadedServer, free_port
 from conftest import FakeFactory, fake_factory
 
 pytestmark = pytest.mark.browser

@@ -12,8 +12,8 @@ import pytest
 from test_browser import _open_dashboard
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import ThreadedServer, free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import ThreadedServer, free_port
 
 pytestmark = pytest.mark.browser
 

@@ -16,7 +16,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import FakeFactory, fake_factory, stream_frames, wait_status
 from twin.runs.metrics import METRIC_KEYS
 

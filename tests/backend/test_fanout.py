@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from backend.fanout import StreamHub
+from backend.streaming.fanout import StreamHub
 
 
 def test_stalled_client_drops_oldest_and_fast_client_gets_all() -> None:

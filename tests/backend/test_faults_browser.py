@@ -11,8 +11,8 @@ import pytest
 from test_browser import _wait_text
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import ThreadedServer, free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import ThreadedServer, free_port
 from conftest import wait_model_ready
 
 pytestmark = pytest.mark.browser

@@ -11,8 +11,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
 from conftest import fake_factory, wait_status
 from twin.config import load_config
 from twin.limits import furnace_name

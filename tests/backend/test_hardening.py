@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 from pydantic import ValidationError
 
 from backend.app import create_app
-from backend.settings import MIN_TOKEN_LENGTH, Settings
+from backend.core.settings import MIN_TOKEN_LENGTH, Settings
 from conftest import fake_factory, wait_status
 
 LOOPBACK = "http://127.0.0.1"

@@ -18,8 +18,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.repository import RunRepository
-from backend.settings import Settings
+from backend.core.settings import Settings
+from backend.storage.repository import RunRepository
 from conftest import fake_factory, wait_status
 from twin.runs import record as record_module
 from twin.runs.record import load_arrays
@@ -42,7 +42,7 @@ def test_finding_08_series_appended_not_rewritten(tmp_path, small_cfg, monkeypat
 
     monkeypatch.setattr(record_module, "save_arrays", counting)
     monkeypatch.setattr("twin.runs.series_store.save_arrays", counting)
-    monkeypatch.setattr("backend.run_files.save_arrays", counting)
+    monkeypatch.setattr("backend.storage.run_files.save_arrays", counting)
     with client(tmp_path, small_cfg, fake_factory(step_cost_s=0.002), flush_interval_s=0.05) as c:
         run_id = c.post("/api/runs", json={"duration": 60.0}).json()["id"]  # 600 samples at speed max
         wait_status(c, run_id, {"finished"})
@@ -176,9 +176,9 @@ CRASH = """
 import os, sys, time
 from pathlib import Path
 import rerun as rr
-from backend.repository import RunRepository
-from backend.run_files import RunFiles
-from backend.recording import RecordingSink
+from backend.storage.repository import RunRepository
+from backend.storage.run_files import RunFiles
+from backend.storage.recording import RecordingSink
 from twin.config import small_config
 from twin.runs.series_store import SeriesStore
 sys.path.insert(0, {tests!r})

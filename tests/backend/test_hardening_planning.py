@@ -20,9 +20,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.loop_factory import DefaultLoopFactory
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
+from backend.runs.loop_factory import DefaultLoopFactory
 from conftest import REPO, wait_model_ready, wait_status
 
 LONG_PLAN = {"reference": {"setpoint": 1100.0, "t_E": 600.0}, "duration": 600.0}  # ~a minute or more to plan
@@ -204,7 +204,7 @@ def test_finding_13_sigterm_during_setup_ends_quickly(tmp_path) -> None:
             proc.kill()
             proc.wait()
     assert took < 10.0, took  # was 32 s: the shutdown waited for the set-up's plan
-    from backend.repository import RunRepository
+    from backend.storage.repository import RunRepository
 
     row = RunRepository(tmp_path / "data" / "runs.sqlite3").get(run_id)
     assert row is not None and row.status == "interrupted" and row.ended_at is not None

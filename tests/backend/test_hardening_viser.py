@@ -19,8 +19,8 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
 from conftest import fake_factory
 
 TOKEN = "view-token-0123456789"

@@ -16,7 +16,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import stream_frames, wait_model_ready, wait_status
 
 # 30 s: a change is in force once re-planned, which takes seconds of wall time on a loaded machine; short and

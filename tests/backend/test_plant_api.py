@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import fake_factory, wait_status
 from twin.furnace.opcua.options import OpcUaOptions
 

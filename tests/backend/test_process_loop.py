@@ -1,4 +1,4 @@
-"""A run's loop in its own process (backend/process_loop.py) answers like the loop itself: samples, changes
+"""A run's loop in its own process (backend/runs/process_loop.py) answers like the loop itself: samples, changes
 whose futures settle with the step that installs their plan, refusals as the same exceptions, faults, the
 series appended by the child, and a Stop while the first plan is made ends the child at once."""
 
@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from backend.process_loop import ProcessLoop
+from backend.runs.process_loop import ProcessLoop
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.runs.series_store import consolidate
 from twin.scenario import PointsReference, Scenario, parse_faults, parse_reference

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from backend.recording import RecordingSink
+from backend.storage.recording import RecordingSink
 from twin.runs.record import Snapshot
 
 

@@ -18,9 +18,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.rerun_viewer import grpc_url, reachable, rerun_binary
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
+from backend.streaming.rerun_viewer import grpc_url, reachable, rerun_binary
 from conftest import wait_status
 
 ENTITIES = ("/field/estimated", "/field/true", "/temperature/T_mean_hat", "/tc/reading/TC1", "/tc/error/TC4",

@@ -12,9 +12,9 @@ import httpx
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.rerun_viewer import RerunWebViewer, reachable
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
+from backend.streaming.rerun_viewer import RerunWebViewer, reachable
 from conftest import fake_factory, wait_status
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from backend.threaded_server import free_port
+from backend.core.threaded_server import free_port
 
 SERVE = (
     "import sys, logging; logging.basicConfig(level=logging.INFO);"

@@ -16,9 +16,9 @@ import schemathesis
 from hypothesis import HealthCheck, given, settings
 
 from backend.app import create_app
-from backend.loop_factory import WarmUpStatus
-from backend.settings import Settings
-from backend.threaded_server import ThreadedServer, free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import ThreadedServer, free_port
+from backend.runs.loop_factory import WarmUpStatus
 from conftest import FakeFactory, FakeStudyRunner
 
 WARM_UP_S = 3.0

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from backend.series import load_series, series_json
+from backend.streaming.series import load_series, series_json
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 
 N_Y, N_X = 2, 3

@@ -11,7 +11,7 @@ import time
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import fake_factory
 
 

@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 from conftest import FakeStudyRunner
 
 TOKEN = "studies-token-0123456789"

@@ -8,8 +8,8 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.settings import Settings
-from backend.threaded_server import free_port
+from backend.core.settings import Settings
+from backend.core.threaded_server import free_port
 from backend.viser import AUTO, colour_range, stored_snapshot, turbo_rgb, vertex_values
 from conftest import fake_factory, wait_status
 

@@ -17,8 +17,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.loop_factory import DefaultLoopFactory
-from backend.settings import Settings
+from backend.core.settings import Settings
+from backend.runs.loop_factory import DefaultLoopFactory
 from conftest import wait_status
 
 

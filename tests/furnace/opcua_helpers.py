@@ -93,7 +93,7 @@ def emulator_process(folder: Path, *args: str, port: int | None = None, env: dic
     folder.mkdir(parents=True, exist_ok=True)
     port = port or free_port()
     log, stats = folder / f"emulator-{port}.log", folder / f"emulator-{port}.json"
-    cmd = [sys.executable, "-m", "twin.cli", "--config", str(small_config_file(folder)), "emulate",
+    cmd = [sys.executable, "-m", "furnace_twin.cli", "--config", str(small_config_file(folder)), "emulate",
            "--endpoint", endpoint(port), "--data-dir", str(folder / "emulator-data"), "--stats", str(stats), *args]
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env or child_env(), cwd=folder)
@@ -252,7 +252,7 @@ def twin_app(tmp_path: Path, cfg: Any, **opcua: Any) -> Any:
     from fastapi.testclient import TestClient
 
     from backend.app import create_app
-    from backend.settings import Settings
+    from backend.core.settings import Settings
     from twin.furnace.opcua.options import OpcUaOptions
 
     settings = Settings(data_dir=tmp_path / "data", flush_interval_s=0.5,

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
+from twin.endpoints import endpoint_allowed, is_loopback, parse_allow_list, parse_endpoint
 from twin.furnace.emulator.interlock import WatchdogInterlock, clamp_setpoint
 from twin.furnace.emulator.timing import TimingRecord
-from twin.furnace.opcua.endpoints import endpoint_allowed, is_loopback, parse_allow_list, parse_endpoint
 from twin.furnace.opcua.nodes import MappingError, NodeMap, load_mapping, mapping_from_dict
 from twin.scenario import Scenario
 

@@ -157,7 +157,7 @@ def test_twin_killed_mid_run_the_emulator_turns_the_lamps_off(tmp_path) -> None:
         scenario = tmp_path / "twin.json"
         scenario.write_text(json.dumps({**BASE, "duration": 300.0, "plant": {"kind": "opcua", "endpoint": emu.url}}))
         twin = subprocess.Popen(
-            [sys.executable, "-m", "twin.cli", "--config", str(small_config_file(tmp_path)), "run",
+            [sys.executable, "-m", "furnace_twin.cli", "--config", str(small_config_file(tmp_path)), "run",
              "--scenario", str(scenario), "--out", str(tmp_path / "out")],
             stdout=subprocess.DEVNULL, stderr=open(tmp_path / "twin.log", "wb"),
             env=child_env(FURNACE_TWIN_DATA_DIR=str(tmp_path / "twin-data")), cwd=tmp_path)

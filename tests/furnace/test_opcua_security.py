@@ -94,9 +94,9 @@ def test_serving_without_security_beyond_loopback_needs_the_flag(monkeypatch) ->
 
 
 def test_the_emulate_command_refuses_with_a_message(tmp_path) -> None:
-    out = subprocess.run([sys.executable, "-m", "twin.cli", "emulate", "--endpoint", "opc.tcp://0.0.0.0:4999/"],
+    out = subprocess.run([sys.executable, "-m", "furnace_twin.cli", "emulate", "--endpoint", "opc.tcp://0.0.0.0:4999/"],
                          capture_output=True, text=True, env=child_env(), cwd=tmp_path, timeout=120)
     assert out.returncode == 2 and "--allow-insecure" in out.stderr and "Traceback" not in out.stderr
-    out = subprocess.run([sys.executable, "-m", "twin.cli", "emulate", "--endpoint", "http://127.0.0.1:4999/"],
+    out = subprocess.run([sys.executable, "-m", "furnace_twin.cli", "emulate", "--endpoint", "http://127.0.0.1:4999/"],
                          capture_output=True, text=True, env=child_env(), cwd=tmp_path, timeout=120)
     assert out.returncode == 2 and "must start with opc.tcp://" in out.stderr

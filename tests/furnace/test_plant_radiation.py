@@ -224,7 +224,7 @@ def test_plant_rtf_times_the_papers_oscillating_run(cfg, small_radiation, monkey
     """plant_rtf runs what its docstring says and divides simulated by wall time (a fake clock)."""
     from types import SimpleNamespace
 
-    import twin.runs.bench as bench
+    import benchmarks.bench as bench
 
     calls = []
     advance = Plant.advance

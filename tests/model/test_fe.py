@@ -16,6 +16,7 @@ from scipy.interpolate import RegularGridInterpolator
 from twin.config import small_config
 from twin.model.fe import FEModel
 from twin.physics.boundary import inert_gas_temperature
+from twin.physics.fillet import fillet_box
 
 # Every exact identity below is checked to 1e-10 relative: the quantities are sums of ~10^2
 # products of O(1) numbers, so double-precision rounding stays near 1e-14; 1e-10 leaves margin.
@@ -117,7 +118,7 @@ def test_quadratic_forms_of_bilinear_fields(fe: FEModel) -> None:
 def test_fillet_mean_and_inhomogeneity(fe: FEModel) -> None:
     f = _bilinear(F_COEF)
     tf = _nodal(fe, f)
-    x0, x1, y0, y1 = fe.cfg.fillet
+    x0, x1, y0, y1 = fillet_box(fe.cfg.specimen.length, fe.cfg.specimen.width)
     X, Y, Wt = _gauss_2d(x0, x1, y0, y1)
     area = (x1 - x0) * (y1 - y0)
     mean = np.sum(Wt * f(X, Y)) / area
@@ -131,7 +132,7 @@ def test_fillet_mean_of_a_piecewise_bilinear_field(fe: FEModel) -> None:
     rng = np.random.default_rng(2)
     theta = rng.uniform(800.0, 1200.0, fe.n)
     interp = RegularGridInterpolator((fe.y_nodes, fe.x_nodes), theta.reshape(fe.ny_nodes, fe.nx_nodes))
-    x0, x1, y0, y1 = fe.cfg.fillet
+    x0, x1, y0, y1 = fillet_box(fe.cfg.specimen.length, fe.cfg.specimen.width)
     n = 1200  # midpoint rule: exact on the bilinear pieces; only cells cut by node lines err
     xs = x0 + (np.arange(n) + 0.5) * (x1 - x0) / n
     ys = y0 + (np.arange(n) + 0.5) * (y1 - y0) / n

@@ -2,7 +2,7 @@
 runs: 900 K in 15 s, the faults at 35 s in the steady state).  Requirements of issue 14: a TC stuck or
 dropped is left out and the TC4 error stays within twice its fault-free value; a failed lamp group is named,
 the feedforward re-planned without it (its command 0) and the event says what the groups left can hold;
-a fault-free run raises nothing.  Measured figures for the default furnace: twin.runs.fault_study."""
+a fault-free run raises nothing.  Measured figures for the default furnace: scripts/fault_study.py."""
 
 from __future__ import annotations
 

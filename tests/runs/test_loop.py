@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from twin.config import small_config
+from twin.experiments.run import execute_run
 from twin.runs.loop import ClosedLoop
 from twin.runs.metrics import run_metrics
-from twin.runs.runner import execute_run
 from twin.scenario import PAPER_ESTIMATOR, OscillationSpec, Scenario, TransitionReference
 
 
@@ -180,7 +180,7 @@ def test_live_reference_and_oscillation_changes(small_radiation, plans):
     assert loop.estimator is not None
     # the record keeps both changes (from the first sample that uses each) and the windows move to the
     # reference change: transient 5..15 s, steady 20..25 s, errors relative to 900 K
-    from twin.runs.events import load_changes
+    from twin.events import load_changes
     from twin.runs.metrics import windows_of
 
     a = loop.record.arrays()
@@ -224,7 +224,7 @@ def test_unreachable_reference_is_refused_and_changes_nothing(small_radiation, p
 
 def test_the_record_keeps_events_and_changes_through_save_and_load(tmp_path):
     """timeseries.npz holds the events with their levels and the live changes; older files without them load."""
-    from twin.runs.events import RunChange, RunEvent, change_arrays, event_arrays, load_changes, load_events
+    from twin.events import RunChange, RunEvent, change_arrays, event_arrays, load_changes, load_events
     from twin.runs.record import load_arrays, save_arrays
 
     events = [RunEvent(0.0, "run started"), RunEvent(12.5, "T2v at full power", "warn")]

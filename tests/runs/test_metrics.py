@@ -193,7 +193,7 @@ def test_metrics_are_relative_to_the_setpoint(seed, factor) -> None:
 def test_a_reference_change_moves_the_windows_and_the_scale():
     """After a reference change at t_c the windows are t_c..t_c+t_E (transient) and t_c+1.5..2 t_E (steady)
     of the new reference, and errors are relative to its setpoint (module docstring of twin.runs.metrics)."""
-    from twin.runs.events import RunChange, change_arrays
+    from twin.events import RunChange, change_arrays
 
     ts = _series(n_t=401, t_E=10.0)  # 0..20 s at 0.05 s
     t = ts["t"]

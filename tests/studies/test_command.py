@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from twin.cli import build_parser, main
+from furnace_twin.cli import build_parser, main
 from twin.config import DEFAULT_CONFIG_PATH, small_config
 
 DASK = str(Path(sys.executable).with_name("dask"))

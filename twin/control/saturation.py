@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from twin.runs.events import RunEvent
+from twin.events import RunEvent
 
 AT_BOUND = 1e-3  # a group within this fraction of u_max of 0 or 1 is at its bound
 MIN_FULL_S = 1.0  # a spell at full power is reported after this long

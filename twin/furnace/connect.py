@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
+from twin.endpoints import endpoint_allowed
 from twin.furnace.interface import Furnace
-from twin.furnace.opcua.endpoints import endpoint_allowed
 from twin.furnace.opcua.options import OpcUaOptions, certificate_dir
 from twin.scenario import Scenario
 

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.physics.boundary import edge_losses, inert_gas_temperature
-from twin.physics.fillet import Fillet
+from twin.physics.fillet import Fillet, fillet_box
 from twin.physics.grid import cell_centers
 from twin.physics.materials import Steel
 
@@ -208,7 +208,7 @@ class FEModel:
     # ---- fillet quantities (19), (21) ----
     @cached_property
     def _fillet_factors(self) -> tuple[Array, Array, Array, Array, float]:
-        x0, x1, y0, y1 = self.cfg.fillet
+        x0, x1, y0, y1 = fillet_box(self.cfg.specimen.length, self.cfg.specimen.width)
         area = (x1 - x0) * (y1 - y0)
         return (
             hat_integrals(self.x_nodes, x0, x1),

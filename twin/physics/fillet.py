@@ -43,6 +43,15 @@ FILLET_X = (0.25, 0.75)
 FILLET_Y = (0.2, 0.8)
 
 
+def fillet_box(L_s: float, W_s: float) -> tuple[float, float, float, float]:
+    """The fillet Omega_f as (x0, x1, y0, y1) in m on a specimen of length L_s and width W_s (m).
+
+    >>> fillet_box(4.0, 10.0)
+    (1.0, 3.0, 2.0, 8.0)
+    """
+    return (FILLET_X[0] * L_s, FILLET_X[1] * L_s, FILLET_Y[0] * W_s, FILLET_Y[1] * W_s)
+
+
 def _overlap(centres: Array, size: float, lo: float, hi: float) -> Array:
     """Length of [c - h/2, c + h/2] inside [lo, hi] for uniform cells of spacing h = size / n."""
     h = size / len(centres)
@@ -66,7 +75,7 @@ class Fillet:
     def on_grid(cls, x: ArrayLike, y: ArrayLike, L_s: float, W_s: float) -> Fillet:
         """The fillet on the uniform grid with cell centres x (N_x,), y (N_y,) in m."""
         xv, yv = np.asarray(x, float), np.asarray(y, float)
-        (x0, x1), (y0, y1) = (FILLET_X[0] * L_s, FILLET_X[1] * L_s), (FILLET_Y[0] * W_s, FILLET_Y[1] * W_s)
+        x0, x1, y0, y1 = fillet_box(L_s, W_s)
         a = np.outer(_overlap(yv, W_s, y0, y1), _overlap(xv, L_s, x0, x1))
         eps_x, eps_y = 1e-12 * L_s, 1e-12 * W_s
         mx = (xv >= x0 - eps_x) & (xv <= x1 + eps_x)

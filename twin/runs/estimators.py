@@ -7,7 +7,7 @@ reaches the controller.  With ``calibration.controller_follows`` (off by default
 parameter is known well (its sigma below ``calibration.replan_threshold``) and has moved by more than the
 threshold since the model in force was built, at most once per ``calibration.replan_interval`` s, and only
 while the reference holds still: during a heat-up the parameters cannot be told apart (lamp efficiency and
-emissivity correlate at -0.98 there, ``python -m twin.estimation.observability``) and the truth's latent
+emissivity correlate at -0.98 there, ``python scripts/observability.py``) and the truth's latent
 heat looks like weak lamps; a re-plan on such an estimate at 108 s of the default oscillating campaign run
 drove the lamps to full power and overshot the reference by 33 K (3.0 % transient mean error instead of 1.3 %).
 The estimators learn their parameters only while the reference holds, too (before, the parameters are

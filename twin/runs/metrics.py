@@ -43,9 +43,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.events import load_changes
 from twin.model.tables import PARAMETERS  # the order of the record's ``parameters``
 from twin.physics.fillet import Fillet
-from twin.runs.events import load_changes
 
 Array = NDArray[np.float64]
 

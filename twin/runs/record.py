@@ -19,18 +19,18 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
 * live changes: ``change_t`` (s, the first sample that uses the change), ``change_kind``
   (``reference`` or ``oscillation``) and ``change_json`` (the new reference / oscillation as JSON); the
   metrics' windows start at the last reference change (:func:`twin.runs.metrics.windows_of`); these and
-  the events are :class:`twin.runs.events.RunEvent` and :class:`twin.runs.events.RunChange`;
+  the events are :class:`twin.events.RunEvent` and :class:`twin.events.RunChange`;
 * the run's constants: ``x`` (N_x), ``y`` (N_y) cell centres in m, ``tc_positions`` (4, 2) m,
   ``L_s``, ``W_s`` m, ``t_E`` s, ``setpoint`` K, ``group_names``, ``scenario`` (JSON).
 
-This module (with :mod:`twin.runs.events` for the events' and changes' keys) is the only place that
+This module (with :mod:`twin.events` for the events' and changes' keys) is the only place that
 names these keys; the loop, the metrics, the figures, the backend's flushes and recovery and the 3D view
 read and write runs through it.
 
 Example
 -------
 >>> import numpy as np
->>> from twin.runs.events import load_changes
+>>> from twin.events import load_changes
 >>> rec = RunRecord(RunHeader(x=np.arange(3.0), y=np.arange(2.0), tc_positions=np.zeros((4, 2)), L_s=3.0,
 ...                           W_s=2.0, t_E=1.0, setpoint=1000.0, group_names=("a",), scenario="{}"),
 ...                 has_truth=False)   # e.g. a real furnace
@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.runs.events import RunChange, RunEvent, change_arrays, event_arrays, event_level
+from twin.events import RunChange, RunEvent, change_arrays, event_arrays, event_level
 
 Array = NDArray[np.float64]
 

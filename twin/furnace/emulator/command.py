@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
-from twin.furnace.opcua.endpoints import is_loopback, parse_endpoint
+from twin.endpoints import is_loopback, parse_endpoint
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +87,7 @@ def emulate_command(cfg: FurnaceConfig, args: Any) -> int:
     from twin.furnace.simulated import SimulatedFurnace
     from twin.limits import scenario_limits
     from twin.radiation import radiation_model
-    from twin.runs.runner import ScenarioError, load_scenario
+    from twin.user_files import ScenarioError, load_scenario
 
     try:
         endpoint, users = check_arguments(args)

@@ -40,12 +40,12 @@ from typing import Any, Literal
 
 import numpy as np
 
+from twin.endpoints import parse_endpoint
 from twin.furnace.emulator.address_space import AddressSpace, utc_now
 from twin.furnace.emulator.interlock import WATCHDOG_TIMEOUT_S, WatchdogInterlock
 from twin.furnace.emulator.timing import TimingRecord
 from twin.furnace.interface import Furnace
 from twin.furnace.opcua import nodes as names
-from twin.furnace.opcua.endpoints import parse_endpoint
 from twin.furnace.opcua.nodes import NodeMap
 from twin.furnace.opcua.security import PasswordUsers, secure_server
 from twin.scenario import OscillationSpec

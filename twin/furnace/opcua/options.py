@@ -3,7 +3,7 @@
 The same settings serve ``furnace-twin serve`` (the dashboard's runs) and ``furnace-twin run``; the
 scenario only names the endpoint, never credentials.
 
-- ``FURNACE_TWIN_OPCUA_ENDPOINTS``: allow-list of endpoints (:mod:`twin.furnace.opcua.endpoints`), loopback
+- ``FURNACE_TWIN_OPCUA_ENDPOINTS``: allow-list of endpoints (:mod:`twin.endpoints`), loopback
   by default;
 - ``FURNACE_TWIN_OPCUA_SECURITY``: ``none`` or ``sign-encrypt`` (Basic256Sha256, Sign & Encrypt, certificates);
 - ``FURNACE_TWIN_OPCUA_USERNAME``, ``FURNACE_TWIN_OPCUA_PASSWORD``: if the furnace asks for them;
@@ -27,7 +27,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from twin.furnace.opcua.endpoints import LOOPBACK_ALLOW_LIST, AllowEntry, parse_allow_list
+from twin.endpoints import LOOPBACK_ALLOW_LIST, AllowEntry, parse_allow_list
 
 Security = Literal["none", "sign-encrypt"]
 

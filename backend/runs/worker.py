@@ -1,0 +1,321 @@
+"""One run's closed loop, driven from its own worker thread.
+
+:class:`RunWorker` owns the ``twin.runs.loop.ClosedLoop`` of a run and everything the run
+writes: the ``.rrd`` recording, ``timeseries.npz``, ``metrics.json`` and its database
+rows.  The run manager's async task calls :meth:`RunWorker.advance` in the run's thread;
+each call steps the loop as far as the speed allows (real time x factor, or as fast as
+possible) for at most a small wall-time budget and returns the latest snapshot.  A loop on a
+real-time furnace (``paced_by_furnace``) is not paced here: its step waits, in this thread, for the
+furnace's next sample, so the furnace's clock drives the run and the server's event loop never waits.
+Reference / oscillation / fault changes are queued and handed to the loop between two samples, in
+this thread, never on the event loop (``backend.runs.changes``, mixed into the worker).  A loop that
+re-plans in the background returns a future per change (``twin.runs.replanning``): the change is
+``pending`` until its plan is in force (``applied``, with the run time), and ends ``superseded`` (a later
+change of the same kind won), ``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run
+ended first); faults apply at once.  Every plan of the run has a budget (``Settings.plan_max_s``,
+``plan_max_mb``) and is cancelled by the run's stop event, also while the run is starting.
+
+The worker keeps the run's events (``backend.runs.events``: the loop's and the server's), each added once
+in the worker thread to its list, the loop's run record (``timeseries.npz``) and the recording.  The run's
+fault events (faults injected, cleared, detected) are kept in ``faults.json`` beside the recording as well.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from backend.core.settings import Settings
+from backend.runs.changes import RunChanges, _Change
+from backend.runs.events import RunEvents, end_event
+from backend.storage.data_dir import DataDir
+from backend.storage.recording import RecordingSink
+from backend.storage.repository import RunRepository
+from backend.storage.run_files import RunFiles, write_json_atomic, write_npz_atomic
+from backend.streaming.frames import SnapshotLike, events_of, json_safe, scalar_values
+from twin.config import FurnaceConfig
+from twin.control.budget import PlanBudget, PlanCancelled
+from twin.events import RunEvent, event_arrays, event_level
+from twin.physics.fillet import Fillet
+from twin.runs.series_store import SeriesStore, consolidate
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
+
+log = logging.getLogger(__name__)
+
+
+class LoopLike(Protocol):
+    """The part of ``twin.runs.loop.ClosedLoop`` the backend uses (docs/interfaces.md)."""
+
+    @property
+    def done(self) -> bool: ...
+
+    @property
+    def paced_by_furnace(self) -> bool: ...  # a real-time furnace: step() waits for its samples
+
+    def step(self) -> Any: ...
+
+    def set_reference(self, ref: Reference) -> Future[float] | None: ...
+
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float] | None: ...
+
+    def timeseries(self) -> dict[str, Any]: ...
+
+    def metrics(self) -> dict[str, Any]: ...
+
+
+class LoopFactory(Protocol):
+    """Builds a run's loop; its first plan keeps to ``budget`` and stops when the budget is cancelled."""
+
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike: ...
+
+
+#: the events of a run that faults.json keeps (twin.furnace.simulated.faults, twin.runs.loop)
+FAULT_EVENT_PREFIXES = ("fault injected", "faults cleared", "fault detected")
+
+
+class DiskFull(RuntimeError):
+    """The data directory passed its quota, or the disk its free-space reserve, during the run."""
+
+
+@dataclass(frozen=True)
+class Advance:
+    """Result of one :meth:`RunWorker.advance` call."""
+
+    snapshot: SnapshotLike | None
+    seq: int
+    wall_time: float
+    steps: int
+    samples: tuple[tuple[SnapshotLike, int, float], ...]  # (snapshot, seq, wall time) of this call
+    finished: bool
+    wait_s: float
+
+
+class RunWorker(RunChanges):
+    """Steps one closed loop at the scenario's speed and persists what it produces."""
+
+    def __init__(
+        self,
+        run_id: str,
+        scenario: Scenario,
+        cfg: FurnaceConfig,
+        settings: Settings,
+        repo: RunRepository,
+        files: RunFiles,
+        loop_factory: LoopFactory,
+        *,
+        disk: DataDir | None = None,
+        notes: tuple[str, ...] = (),
+        live_url: str | None = None,
+    ) -> None:
+        self.run_id = run_id
+        self.disk = disk
+        self.live_url = live_url  # a rerun viewer / proxy the recording also streams to
+        self.scenario = scenario
+        self.cfg = cfg
+        self.settings = settings
+        self.repo = repo
+        self.files = files
+        self._factory = loop_factory
+        self.loop: LoopLike | None = None
+        self.recording: RecordingSink | None = None
+        self.speed: float | None = None if scenario.speed == "max" else float(scenario.speed)
+        self.reference: Reference = scenario.reference
+        self.oscillation: OscillationSpec = scenario.oscillation
+        #: the faults injected (``at`` in run time; scenario's, then each applied PUT) and the fault events so far
+        self.faults: list[FaultSpec] = list(scenario.faults)
+        self.fault_events: list[dict[str, Any]] = []
+        self.latest: SnapshotLike | None = None
+        self.latest_wall = 0.0
+        self.seq = 0
+        self.stop_requested = threading.Event()
+        self._changes: deque[_Change] = deque()
+        self._changes_lock = threading.Lock()
+        self._origin_wall = 0.0
+        self._origin_t = 0.0
+        self._last_flush = 0.0
+        self.series = SeriesStore(files.folder)  # the time series, appended at each flush
+        self._events = RunEvents(tuple(g.name for g in cfg.lamps.groups), cfg.sampling.t_s)
+        self.events = self._events.items  #: the run's events, oldest first (backend.runs.events)
+        self.notes = notes  #: feasibility warnings of the scenario, reported as events when the run starts
+        self.fillet = Fillet.of(cfg)  # for the frames' spread (backend.streaming.frames.frame_extra)
+
+    # ---- events ----
+    def add_event(self, t: float, text: str, level: str = "info", *, in_record: bool = False) -> None:
+        """One report of the run (worker thread): kept for the stream, the run record (``in_record``: the loop
+        put it there already) and the recording."""
+        event = RunEvent(float(t), text, level)
+        self.events.append(event)
+        note = getattr(getattr(self.loop, "record", None), "add_event", None)
+        if not in_record and callable(note):
+            note(event)
+        if self.recording is not None:
+            self.recording.log_event(event.t, event.text, event.level)
+
+    def _add_later(self, t: float | None, text: str, level: str) -> None:
+        """An event from another thread (a change settled by the re-planning thread): added at the next step."""
+        at = t if t is not None else (float(self.latest.t) if self.latest is not None else 0.0)
+        self._events.later(RunEvent(float(at), text, level))
+
+    def _add_queued(self) -> None:
+        for e in self._events.queued():
+            self.add_event(e.t, e.text, e.level)
+
+    # ---- set-up (worker thread) ----
+    def build(self) -> None:
+        """Create the closed loop (this solves the first feedforward: seconds) and the recording."""
+        self.files.folder.mkdir(parents=True, exist_ok=True)
+        self.recording = RecordingSink(
+            self.cfg, self.run_id, self.files.recording,
+            tc_positions=self.cfg.tc_positions(self.scenario.tc4),
+            image_interval=self.settings.recording_image_interval_s, live_url=self.live_url,
+        )
+        self.loop = self._factory(self.cfg, self.scenario, budget=self.budget())
+        if self.stop_requested.is_set():  # stopped while the first plan was being made
+            raise PlanCancelled("the run was stopped while it was starting")
+        sc = self.scenario
+        speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
+        self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
+                            f"{describe(sc.oscillation)}, {sc.duration:g} s, {speed}")
+        for note in self.notes:
+            self.add_event(0.0, f"feasibility: {note}", "warn")
+        self._rebase(0.0)
+        self._last_flush = time.monotonic()
+
+    def budget(self) -> PlanBudget:
+        """The plans' budget: this server's limits, cancelled by the run's stop."""
+        return PlanBudget.of(self.settings.plan_max_s, self.settings.plan_max_mb, self.stop_requested)
+
+    def _rebase(self, t: float) -> None:
+        """Real-time pacing restarts from now at simulated time ``t`` (after set-up or a re-plan)."""
+        self._origin_wall = time.monotonic()
+        self._origin_t = t
+
+    # ---- stepping (worker thread) ----
+    def _finished(self) -> bool:
+        assert self.loop is not None
+        if self.loop.done:
+            return True
+        return self.latest is not None and float(self.latest.t) >= self.scenario.duration - 1e-9
+
+    def advance(self, budget_s: float) -> Advance:
+        """Step while samples are due (speed) for at most ``budget_s`` wall seconds."""
+        assert self.loop is not None
+        start = time.monotonic()
+        steps = 0
+        samples: list[tuple[SnapshotLike, int, float]] = []
+        t_s = self.cfg.sampling.t_s
+        wait = 0.0
+        self._add_queued()
+        while not self.stop_requested.is_set() and not self._finished():
+            if self._apply_changes():
+                self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
+            if self.speed is None and getattr(self.loop, "replanning", False):
+                # at speed max simulated time waits for a re-plan (free here), so the plan is not stale
+                # when it comes in and a change counts from the sample it was asked at; in real time
+                # the furnace goes on under the old plan
+                wait = 0.02
+                break
+            next_t = (float(self.latest.t) if self.latest is not None else 0.0) + t_s
+            if self.speed is not None and not self.loop.paced_by_furnace:
+                due = self._origin_wall + (next_t - self._origin_t) / self.speed
+                wait = due - time.monotonic()
+                if wait > 0:
+                    break
+            snap = self.loop.step()
+            self.latest, self.latest_wall = snap, time.time()
+            self.seq += 1
+            steps += 1
+            samples.append((snap, self.seq, self.latest_wall))
+            if self.recording is not None:
+                self.recording.add(snap)
+            self._add_queued()
+            for text in events_of(snap.events):  # the loop put them into its record with the sample
+                self.add_event(float(snap.t), text, event_level(text), in_record=True)
+                if text.startswith(FAULT_EVENT_PREFIXES):
+                    self.fault_events.append({"t": float(snap.t), "text": text})
+            for event in self._events.saturation.update(float(snap.t), snap.u):
+                self.add_event(event.t, event.text, event.level)
+            wait = 0.0
+            if time.monotonic() - start >= budget_s:
+                break
+        if time.monotonic() - self._last_flush >= self.settings.flush_interval_s:
+            self.flush()
+            problem = None if self.disk is None else self.disk.over()
+            if problem is not None:
+                raise DiskFull(f"{problem}: the run was stopped, its data so far kept")
+        return Advance(self.latest, self.seq, self.latest_wall, steps, tuple(samples), self._finished(),
+                       max(wait, 0.0))
+
+    # ---- persistence (worker thread) ----
+    def _timeseries(self) -> dict[str, Any] | None:
+        if self.loop is None or self.latest is None:
+            return None
+        data = dict(self.loop.timeseries())
+        data.setdefault("scenario", self.scenario.to_json())
+        if not callable(getattr(getattr(self.loop, "record", None), "add_event", None)):
+            data.update(event_arrays(list(self.events)))  # a loop without a record of its own: the worker's
+        return data
+
+    def live_series(self) -> dict[str, Any] | None:
+        """The time series so far (the ``timeseries.npz`` layout), fresher than the last flush, with the events
+        numbered as the frames number them (this worker's list); any thread.  ``None`` once the loop has
+        closed (a loop in its own process: the run's files have the series then)."""
+        try:
+            data = self._timeseries()
+        except RuntimeError as exc:  # backend.runs.process_loop.LoopProcessError: the run ended meanwhile
+            log.info("run %s: live series unavailable (%s); read from its files", self.run_id, exc)
+            return None
+        if data is not None:
+            data.update(event_arrays(list(self.events)))
+        return data
+
+    def flush(self, metrics: dict[str, Any] | None = None) -> None:
+        """Append the new samples to the time series (``twin.runs.series_store``), store the latest values and
+        push the recording's buffer to disk."""
+        self._last_flush = time.monotonic()
+        append = getattr(self.loop, "append_series", None)  # a loop in its own process appends there
+        record = getattr(self.loop, "record", None)
+        if callable(append) and self.latest is not None:
+            append(str(self.files.folder))
+        elif record is not None and self.latest is not None:
+            self.series.append(record)
+        elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
+            write_npz_atomic(self.files.timeseries, data)
+        if self.recording is not None:
+            self.recording.flush()
+        if self.fault_events or self.faults:
+            write_json_atomic(self.files.faults, {"injected": [f.model_dump(mode="json") for f in self.faults],
+                                                  "events": self.fault_events})
+        latest = None if self.latest is None else scalar_values(self.latest)
+        self.repo.save_progress(self.run_id, latest, metrics)
+
+    def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
+        """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
+        far (``None`` entries where a window was not reached)."""
+        self._add_queued()
+        if status is not None:
+            end = end_event(status, float(self.latest.t) if self.latest is not None else 0.0, error)
+            self.add_event(end.t, end.text, end.level)
+        metrics: dict[str, Any] | None = None
+        if self.loop is not None and self.latest is not None:
+            try:
+                metrics = json_safe(dict(self.loop.metrics()))
+            except Exception:
+                log.exception("run %s: metrics failed", self.run_id)
+        if metrics is not None:
+            write_json_atomic(self.files.metrics, metrics)
+        try:
+            self.flush(metrics)
+            consolidate(self.files.folder, self.files.timeseries, load=False)  # timeseries.npz of product.md
+        finally:
+            if self.recording is not None:
+                self.recording.close()
+            close = getattr(self.loop, "close", None)
+            if callable(close):
+                close()
+        return metrics

@@ -1,0 +1,1 @@
+"""Design studies in the server: queued and run one at a time (``manager``)."""

@@ -1,0 +1,1 @@
+"""The ``furnace-twin`` command line (``cli``): the composition root above ``twin``, ``backend`` and ``benchmarks``."""

@@ -1,0 +1,309 @@
+"""The paper's measurement campaign (section 5): fixed / oscillating specimen x three TC4 positions.
+
+``furnace-twin campaign`` runs the six experiments with the default scenario (t_E = 120 s,
+runs of 2 t_E, eta = 3 L_h sin(2 pi t / Pi) with Pi = 0.15 t_E when oscillating), each with several
+seeds (``--seeds N``, default 5: the seed drives the TC noise and biases), against the honest truth
+by default (``--truth shared`` for the model's own plant), with the twin's default estimator, the paper's
+(``--estimator paper``: averaged model, no calibration) or both side by side (``--estimator both``: the
+paper's runs go to ``paper_estimator/``).  It writes each run's folder
+(``<experiment>/seed_<k>``), ``campaign.md`` putting the paper's reported numbers beside the twin's
+worst over the seeds (a bound that fails is marked), the seeds' ranges and the twin's model against
+the truth open loop, ``campaign.json`` (the ``--json`` output of product.md), and the Fig. 9
+comparison (seed 0).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from twin.config import FurnaceConfig
+from twin.experiments.model_error import MODEL_ERROR_KEYS
+from twin.limits import scenario_limits
+from twin.runs.metrics import METRIC_KEYS
+from twin.scenario import PAPER_ESTIMATOR, EstimatorSpec, Scenario, parse_scenario
+
+if TYPE_CHECKING:
+    from twin.experiments.run import SinkFactory
+
+log = logging.getLogger(__name__)
+
+#: the campaign's estimator choices: the scenario's default (the best measured configuration) and the paper's
+ESTIMATORS: dict[str, EstimatorSpec | None] = {"default": None,
+                                               "paper": EstimatorSpec(**PAPER_ESTIMATOR.model_dump())}
+
+TC4_POSITIONS: tuple[tuple[float, float], ...] = ((0.375, 0.5), (0.5, 0.5), (0.625, 0.5))
+
+#: Numbers the paper reports (section 5 text and Figs. 4, 6, 9), as fractions of T_ref(t_E).
+PAPER: dict[str, dict[str, float]] = {
+    "fixed": {
+        "mean_error_transient_max": 0.02,
+        "mean_error_steady_max": 0.005,
+        "tc4_error_transient_max": 0.015,
+        "tc4_error_steady_max": 0.005,
+        "inhomogeneity_transient_max": 0.10,
+        "inhomogeneity_steady": 0.04,
+    },
+    "oscillating": {
+        "mean_error_transient_max": 0.02,
+        "mean_error_steady_max": 0.0075,
+        "tc4_error_transient_max": 0.03,
+        "tc4_error_steady_max": 0.03,
+        "inhomogeneity_transient_max": 0.10,
+        "inhomogeneity_steady": 0.02,
+    },
+}
+
+
+
+def campaign_scenarios(cfg: FurnaceConfig, t_E: float = 120.0) -> list[tuple[str, Scenario]]:
+    """The six experiments; the oscillation is the paper's 3 L_h sin(2 pi t / (0.15 t_E)), its amplitude
+    capped at the furnace's eta_max (the furnace's default amplitude, ``twin.limits``)."""
+    limits = scenario_limits(cfg)
+    out = []
+    for oscillating in (False, True):
+        for tc4 in TC4_POSITIONS:
+            name = f"{'oscillating' if oscillating else 'fixed'}_tc4_{tc4[0]:g}"
+            scenario = parse_scenario({
+                "reference": {"setpoint": 1100.0, "t_E": t_E},
+                "duration": 2 * t_E,
+                "oscillation": {"enabled": oscillating, "period": 0.15 * t_E},
+                "tc4": list(tc4),
+            }, limits)
+            out.append((name, scenario))
+    return out
+
+
+def _fmt(v: float | None) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{100 * v:.2f} %"
+
+
+def _mode(e: dict[str, Any]) -> str:
+    return "oscillating" if e["oscillation"] else "fixed"
+
+
+#: the true field's metrics are held to the bound of their estimated counterpart: the paper's bounds are
+#: about the specimen, which only a simulation can see
+TRUE_BOUND_OF = {"true_mean_error_steady_max": "mean_error_steady_max",
+                 "true_mean_error_transient_max": "mean_error_transient_max",
+                 "true_inhomogeneity_steady": "inhomogeneity_steady"}
+
+
+def bound(key: str, mode: str) -> float | None:
+    """The paper's value a metric is held to in a specimen mode ("fixed" / "oscillating"), if any."""
+    return PAPER[mode].get(key, PAPER[mode].get(TRUE_BOUND_OF.get(key, "")))
+
+
+def campaign_table(experiments: list[dict[str, Any]]) -> str:
+    """Markdown table: each metric, the paper's value and the twin's per experiment (worst over its seeds);
+    a value above the paper's for its specimen mode is marked ✗ (the true_* rows against the bound of the
+    estimated quantity, shown in parentheses)."""
+    head = "| metric | paper fixed | paper osc. | " + " | ".join(e["name"] for e in experiments) + " |"
+    sep = "|" + "---|" * (3 + len(experiments))
+    rows = [head, sep]
+    for key in METRIC_KEYS:
+        paper = [_fmt(bound(key, m)) for m in ("fixed", "oscillating")]
+        if key in TRUE_BOUND_OF:
+            paper = [f"({p})" for p in paper]
+        cells = [key, *paper]
+        for e in experiments:
+            v, b = e["metrics"].get(key), bound(key, _mode(e))
+            fails = v is not None and b is not None and np.isfinite(v) and v > b
+            cells.append(_fmt(v) + (" ✗" if fails else ""))
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def seeds_table(experiments: list[dict[str, Any]]) -> str:
+    """Markdown table: each metric's range over the seeds, per experiment (min - max)."""
+    head = "| metric | " + " | ".join(e["name"] for e in experiments) + " |"
+    rows = [head, "|" + "---|" * (1 + len(experiments))]
+    for key in METRIC_KEYS:
+        cells = [key]
+        for e in experiments:
+            vals = [s["metrics"].get(key) for s in e["seeds"]]
+            vals = [v for v in vals if v is not None and np.isfinite(v)]
+            cells.append(f"{100 * min(vals):.2f} - {100 * max(vals):.2f} %" if vals else "n/a")
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def model_error_table(experiments: list[dict[str, Any]]) -> str:
+    """Markdown table of the model's open-loop error against the truth, worst over TC4 positions and seeds."""
+    rows = ["| specimen | " + " | ".join(MODEL_ERROR_KEYS) + " |", "|" + "---|" * (1 + len(MODEL_ERROR_KEYS))]
+    for mode in ("fixed", "oscillating"):
+        runs = [e["model_error"] for e in experiments if _mode(e) == mode]
+        if runs:
+            rows.append(f"| {mode} | " + " | ".join(_fmt(worst(runs).get(k)) for k in MODEL_ERROR_KEYS) + " |")
+    return "\n".join(rows)
+
+
+def worst(metrics: list[dict[str, Any]]) -> dict[str, Any]:
+    """Key by key the largest finite value of several metric objects (None where none is finite); every
+    metric here is an error, so the largest is the worst."""
+    out: dict[str, Any] = {}
+    for key in dict.fromkeys(k for m in metrics for k in m):
+        vals = [m.get(key) for m in metrics]
+        finite = [float(v) for v in vals if isinstance(v, int | float) and np.isfinite(v)]
+        out[key] = max(finite) if finite else None
+    return out
+
+
+def run_campaign(
+    cfg: FurnaceConfig,
+    out: Path,
+    t_E: float = 120.0,
+    radiation: Any = None,
+    sink_factories: Iterable[SinkFactory] = (),
+    *,
+    seeds: int = 5,
+    truth: str = "independent",
+    truth_radiation: Any = None,
+    figures: bool = True,
+    estimator: str = "default",
+) -> dict[str, Any]:
+    """Run the six experiments, each with the seeds 0 .. seeds - 1; return the product.md ``campaign --json``
+    object.  Each experiment's ``metrics`` are the worst over its seeds; ``model_error`` is the twin's model
+    against the truth, open loop on each run's inputs (:mod:`twin.experiments.model_error`), also the worst.
+
+    The seed drives the TC noise and (independent truth) the TC biases; runs that start from the same
+    readings share their first plan.  ``figures=False`` skips each run's PNGs (the campaign's own stay).
+    ``estimator`` is a key of :data:`ESTIMATORS` (``default``: the scenario's own).
+    """
+    from twin.experiments.figures import plot_homogeneity_comparison
+    from twin.experiments.model_error import open_loop_model_error
+    from twin.experiments.run import _json_safe, execute_run
+    from twin.furnace.simulated import SimulatedFurnace
+    from twin.furnace.simulated.truth import truth_radiation as load_truth_radiation
+    from twin.radiation import radiation_model
+    from twin.runs.loop import ClosedLoop
+
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator must be one of {sorted(ESTIMATORS)}, got {estimator!r}")
+    chosen = ESTIMATORS[estimator]
+    plan_cache: dict[Any, Any] = {}
+    sinks = list(sink_factories)
+    rad = radiation if radiation is not None else radiation_model(cfg)
+    own = None
+    if truth == "independent":
+        own = truth_radiation if truth_radiation is not None else load_truth_radiation(cfg)
+    out.mkdir(parents=True, exist_ok=True)
+    experiments: list[dict[str, Any]] = []
+    series: dict[str, Any] = {}
+    for name, base in campaign_scenarios(cfg, t_E):
+        runs: list[dict[str, Any]] = []
+        for seed in range(seeds):
+            update: dict[str, Any] = {"seed": seed, "truth": truth}
+            if chosen is not None:
+                update["estimator"] = chosen
+            scenario = base.model_copy(update=update)
+            log.info("campaign: %s, seed %d (truth %s, %s estimator)", name, seed, truth, estimator)
+            folder = out / name / f"seed_{seed}"
+            furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
+            loop = ClosedLoop(cfg, scenario, rad, furnace=furnace, plan_cache=plan_cache)
+            result = execute_run(loop, folder, sink_factories=sinks, figures=figures)
+            ts = loop.timeseries()
+            if seed == 0:
+                series[name] = ts
+            runs.append({
+                "seed": seed,
+                "metrics": _json_safe({k: v for k, v in result.items() if k != "out"}),
+                "model_error": _json_safe(open_loop_model_error(cfg, ts, rad)),
+                "out": str(folder),
+            })
+        experiments.append({
+            "name": name,
+            "oscillation": base.oscillation.enabled,
+            "tc4": list(base.tc4),
+            "metrics": worst([r["metrics"] for r in runs]),
+            "model_error": worst([r["model_error"] for r in runs]),
+            "seeds": [{k: r[k] for k in ("seed", "metrics", "out")} for r in runs],
+        })
+    pairs = [
+        (f"TC4 at ({x:g} L_s, {y:g} W_s)", series[f"fixed_tc4_{x:g}"], series[f"oscillating_tc4_{x:g}"])
+        for x, y in TC4_POSITIONS
+    ]
+    plot_homogeneity_comparison(pairs, out / "homogeneity.png")
+    spec = (chosen if chosen is not None else base.estimator).model_dump(mode="json")
+    result = {"experiments": experiments, "paper": PAPER, "truth": truth, "seeds": list(range(seeds)),
+              "estimator": {"name": estimator, **spec}}
+    (out / "campaign.json").write_text(json.dumps(result, indent=2))
+    (out / "campaign.md").write_text(campaign_report(result, t_E))
+    return result
+
+
+def campaign_report(result: dict[str, Any], t_E: float) -> str:
+    """``campaign.md``: the worst-over-seeds table, the seeds' ranges and the model's own error."""
+    ex, n = result["experiments"], len(result["seeds"])
+    est = result.get("estimator", {})
+    words = (f"; estimator: {est.get('name')} (motion {est.get('motion')}, calibrate {est.get('calibrate')})"
+             if est else "")
+    text = (
+        "# Campaign: the paper's numbers beside the twin's\n\n"
+        f"Truth: {result['truth']}{words}; seeds 0..{n - 1}; t_E = {t_E:g} s.  Relative to T_ref(t_E).  Windows: "
+        "transient 0..t_E, steady 1.5..2 t_E (product.md).\n\n"
+        f"## Worst over the {n} seed{'s' if n != 1 else ''} (✗: above the paper's value for that specimen mode)\n\n"
+        + campaign_table(ex)
+        + "\n\n## Range over the seeds\n\n"
+        + seeds_table(ex)
+        + "\n\n## The twin's model against the truth, open loop (each run's inputs, no estimator)\n\n"
+        + model_error_table(ex)
+        + "\n"
+    )
+    if "paper_estimator" in result:
+        text += ("\n## The paper's estimator beside the default (worst over the seeds: paper -> default)\n\n"
+                 + comparison_table(result["paper_estimator"]["experiments"], ex) + "\n")
+    return text
+
+
+def comparison_table(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> str:
+    """Markdown table of each metric per experiment as ``before -> after`` (each marked ✗ above its bound),
+    plus the true field's transient mean error (held to the estimated one's bound) and the TC4 error's
+    component at the oscillation frequency for the oscillating experiments."""
+    keys = [*METRIC_KEYS, "true_mean_error_transient_max", "tc4_error_oscillation_amplitude"]
+    rows = ["| metric | " + " | ".join(e["name"] for e in after) + " |", "|" + "---|" * (1 + len(after))]
+    for key in keys:
+        cells = [key]
+        for b, a in zip(before, after, strict=True):
+            pair = []
+            for e in (b, a):
+                v, lim = e["metrics"].get(key), bound(key, _mode(e))
+                fails = v is not None and lim is not None and np.isfinite(v) and v > lim
+                pair.append(_fmt(v) + (" ✗" if fails else ""))
+            cells.append(" -> ".join(pair) if any(e["metrics"].get(key) is not None for e in (b, a)) else "n/a")
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
+    t_E = float(args.t_e) if args.t_e else 120.0
+    if t_E <= 1.0:
+        print("furnace-twin campaign: --t-e must be > 1 s", file=sys.stderr)  # noqa: T201
+        return 2
+    if args.seeds < 1:
+        print("furnace-twin campaign: --seeds must be >= 1", file=sys.stderr)  # noqa: T201
+        return 2
+    out = Path(args.out)
+    which = getattr(args, "estimator", "default")
+    first = "default" if which == "both" else which
+    result = run_campaign(cfg, out, t_E, sink_factories=sink_factories, seeds=args.seeds, truth=args.truth,
+                          estimator=first)
+    if which == "both":  # the paper's estimator on the same plants and seeds, beside the default
+        result["paper_estimator"] = run_campaign(cfg, out / "paper_estimator", t_E, sink_factories=sink_factories,
+                                                 seeds=args.seeds, truth=args.truth, estimator="paper")
+        (out / "campaign.json").write_text(json.dumps(result, indent=2))
+        (out / "campaign.md").write_text(campaign_report(result, t_E))
+    if args.json:
+        print(json.dumps(result))  # noqa: T201
+    else:
+        sys.stdout.write(campaign_report(result, t_E))
+        log.info("campaign written to %s", out)
+    return 0

@@ -1,0 +1,142 @@
+"""Headless closed-loop runs: ``furnace-twin run`` (product.md).
+
+A run writes ``metrics.json``, ``timeseries.npz``, PNG figures and, when a sink
+factory is given by the composition root (``furnace_twin/cli.py`` passes the rerun
+recorder from ``backend``), ``recording.rrd``.  ``twin`` itself never imports
+rerun.  The time series is flushed every ``flush_every_s`` simulated seconds and
+on stop or error, so a crash loses at most those seconds.
+
+A scenario whose ``plant`` is a furnace over OPC UA runs against it in real time (the furnace's clock
+paces the loop), with the link settings of ``FURNACE_TWIN_OPCUA_*`` and certificates under
+``$FURNACE_TWIN_DATA_DIR/opcua`` (default ``furnace-data/opcua``).  A furnace lost during the run ends it
+with its data written and exit status 3.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import sys
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, Protocol
+
+from twin.config import FurnaceConfig
+from twin.furnace.interface import FurnaceLost
+from twin.limits import furnace_name, scenario_limits
+from twin.runs.guards import EstimateDiverged
+from twin.runs.loop import ClosedLoop
+from twin.runs.record import Snapshot, save_arrays
+from twin.user_files import ScenarioError, load_scenario
+
+log = logging.getLogger(__name__)
+
+
+class SnapshotSink(Protocol):
+    """Consumes snapshots of one run (a rerun recording, a viser scene, ...)."""
+
+    def add(self, snap: Snapshot) -> None: ...
+
+    def flush(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+SinkFactory = Callable[[Path, ClosedLoop], SnapshotSink]
+
+
+def execute_run(
+    loop: ClosedLoop,
+    out: Path,
+    *,
+    sink_factories: Iterable[SinkFactory] = (),
+    figures: bool = True,
+    flush_every_s: float = 10.0,
+) -> dict[str, Any]:
+    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out`` (and ``status``
+    ``"plant_lost"`` with ``error`` if the furnace was lost: the data up to then is written all the same)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
+    sinks = [make(out, loop) for make in sink_factories]
+    flush_every = max(1, int(round(flush_every_s / loop.t_s)))
+    lost: FurnaceLost | None = None
+    try:
+        for snap in loop.run():
+            for sink in sinks:
+                sink.add(snap)
+            if snap.j % flush_every == 0 and snap.j > 0:
+                loop.record.save(out / "timeseries.npz")
+                for sink in sinks:
+                    sink.flush()
+    except FurnaceLost as exc:
+        log.error("the furnace was lost: %s", exc)
+        lost = exc
+    finally:
+        ts = loop.timeseries()
+        save_arrays(out / "timeseries.npz", ts)
+        for sink in sinks:
+            sink.close()
+        loop.close()
+    metrics = loop.metrics()
+    (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
+    if figures and len(ts["t"]):
+        from twin.experiments.figures import plot_run
+
+        plot_run(ts, out)
+    result: dict[str, Any] = {**metrics, "out": str(out)}
+    if lost is not None:
+        result.update(status="plant_lost", error=str(lost))
+    return result
+
+
+def _json_safe(d: Any) -> Any:
+    """Metrics as JSON values: NaN / inf (a window the run did not reach) become null, nested too."""
+    if isinstance(d, dict):
+        return {k: _json_safe(v) for k, v in d.items()}
+    return None if isinstance(d, float) and not math.isfinite(d) else d
+
+
+def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
+    """``furnace-twin run``: one closed-loop run from a scenario file."""
+    try:
+        limits = scenario_limits(cfg, furnace_name(cfg, getattr(args, "config", None)))
+        scenario = load_scenario(args.scenario, limits, oscillate=args.oscillate, tc4=args.tc4)
+    except ScenarioError as exc:
+        print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    out = Path(args.out)
+    log.info("run: %s -> %s", scenario.to_json(), out)
+    from twin.furnace.connect import open_furnace
+    from twin.radiation import radiation_model
+
+    # a simulated furnace needs the radiation model; a furnace over OPC UA is connected first, so an
+    # endpoint the run cannot use fails at once, before the model is loaded
+    radiation = radiation_model(cfg) if scenario.plant.kind == "simulated" else None
+    try:
+        furnace = open_furnace(cfg, scenario, radiation, data_dir=os.environ.get("FURNACE_TWIN_DATA_DIR",
+                                                                                 "furnace-data"))
+    except (ValueError, OSError) as exc:
+        print(f"furnace-twin run: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    try:
+        radiation = radiation if radiation is not None else radiation_model(cfg)
+        loop = ClosedLoop(cfg, scenario, radiation, furnace=furnace)
+    except BaseException:
+        furnace.close()
+        raise
+    try:
+        result = execute_run(loop, out, sink_factories=sink_factories)
+    except EstimateDiverged as exc:  # the loop switched the lamps off; the data up to it is in `out`
+        print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
+        return 1
+    if args.json:
+        print(json.dumps(_json_safe(result)))  # noqa: T201
+    else:
+        for k, v in result.items():
+            log.info("%-36s %s", k, f"{v:.4f}" if isinstance(v, float) else v)
+    if result.get("status") == "plant_lost":
+        print(f"furnace-twin run: {result['error']}; the data so far is in {out}", file=sys.stderr)  # noqa: T201
+        return 3
+    return 0
