@@ -3,7 +3,7 @@
 import { api } from "./api.js";
 import { baseLayout, CONFIG } from "./charts.js";
 import { compareTable } from "./metrics.js";
-import { $, LIVE, runName } from "./page.js";
+import { $, going, runName } from "./page.js";
 import { state } from "./state.js";
 
 const COLORS = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"];
@@ -12,7 +12,7 @@ const cache = new Map(); // run id -> {detail, series, at}
 
 async function load(id) {
   const known = cache.get(id);
-  const live = known && LIVE.includes(known.detail.status);
+  const live = known && going(known.detail);
   if (known && (!live || Date.now() - known.at < LIVE_EVERY_MS)) return known;
   const [detail, series] = await Promise.all([api("GET", `/api/runs/${id}`),
     api("GET", `/api/runs/${id}/series?max_points=1500`).catch(() => null)]);

@@ -1,7 +1,7 @@
 // Faults of the picked run's simulated furnace: build a list, inject it (PUT /api/runs/{id}/faults replaces
 // the faults in force, times from now), clear it; and what the twin detected (GET /api/runs/{id}: fault_events).
 import { api } from "./api.js";
-import { $, fmt, LIVE } from "./page.js";
+import { $, fmt, going } from "./page.js";
 import { state } from "./state.js";
 
 const UNIT = { drift: "K/s", offset: "K", derate: "fraction kept" };
@@ -53,7 +53,7 @@ function renderPending() {
 }
 
 function updateButtons() {
-  const live = !!state.run && state.run.id === state.runId && LIVE.includes(state.run.status);
+  const live = !!state.run && state.run.id === state.runId && going(state.run);
   $("fault-inject").disabled = !live || !pending.length;
   $("fault-clear").disabled = !live;
 }

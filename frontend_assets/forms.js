@@ -4,7 +4,7 @@ import { estimatorFromForm, showEstimatorSummary } from "./estimatorform.js";
 import { checkSoon, showFeasibility } from "./feasibility.js";
 import { restoreForm, saveForm } from "./formstore.js";
 import { readNumber, readSpeed, setLiveOscillation } from "./inputs.js";
-import { $, describeReference, fmt, LIVE, showMsg } from "./page.js";
+import { $, describeReference, fmt, going, showMsg } from "./page.js";
 import { parsePoints } from "./points.js";
 import { refreshRun, selectRun } from "./run.js";
 import { refreshRuns } from "./runlist.js";
@@ -111,7 +111,7 @@ async function changeReference() {
     if (body.points && e.status === 422) area.classList.add("invalid");
     showMsg(`${what} refused: ${e.message}`, true);
   }
-  btn.disabled = !(state.run && LIVE.includes(state.run.status));
+  btn.disabled = !going(state.run);
 }
 
 // On or off, the opposite of what the server says the run does now, with the live amplitude and period.

@@ -9,7 +9,7 @@ import { wireForms } from "./forms.js";
 import { wireHelp } from "./glossary.js";
 import { wireHeatScale } from "./heatmap.js";
 import { applyLimits } from "./inputs.js";
-import { $, LIVE } from "./page.js";
+import { $, going } from "./page.js";
 import { refreshRun, selectRun } from "./run.js";
 import { refreshRuns, wireRunList } from "./runlist.js";
 import { emptySeries } from "./series.js";
@@ -68,7 +68,7 @@ async function init() {
   startRendering();
   startComparing();
   await refreshRuns();
-  const first = state.runs.find((r) => LIVE.includes(r.status)) || state.runs[0]; // the newest running, else newest
+  const first = state.runs.find((r) => going(r)) || state.runs[0]; // the newest running, else newest
   if (first) await selectRun(first.id);
   setInterval(refreshRuns, 4000);
   setInterval(async () => {

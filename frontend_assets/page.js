@@ -2,6 +2,11 @@
 // references and oscillations in words.
 
 export const LIVE = ["queued", "starting", "running"]; // statuses of a run that is still going
+// a run (from GET /api/runs) that is still going: also "degraded" (no TC reading reaches its estimate) until it
+// ended; a run that ended blind keeps "degraded" with its end time
+export function going(run) {
+  return !!run && (LIVE.includes(run.status) || (run.status === "degraded" && !run.ended_at));
+}
 
 export const $ = (id) => document.getElementById(id);
 const missing = (v) => v === null || v === undefined || Number.isNaN(v);

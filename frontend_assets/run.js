@@ -5,7 +5,7 @@ import { describeChoice, setEstimatorForm } from "./estimatorform.js";
 import { addEvents, clearEvents, noteStatus } from "./events.js";
 import { setLiveOscillation } from "./inputs.js";
 import { metricsTable } from "./metrics.js";
-import { $, badge, describeOscillation, describeReference, esc, fmt, LIVE, showMsg } from "./page.js";
+import { $, badge, describeOscillation, describeReference, esc, fmt, going, showMsg } from "./page.js";
 import { markShown, refreshRuns } from "./runlist.js";
 import { emptySeries, seriesFromStored } from "./series.js";
 import { state } from "./state.js";
@@ -14,7 +14,7 @@ import { renderFaults } from "./faults.js";
 
 // The live controls act on the shown run only while it runs.
 function setControls(run) {
-  const live = run && LIVE.includes(run.status);
+  const live = going(run);
   for (const id of ["ref-btn", "osc-btn", "stop-btn"]) $(id).disabled = !live;
   $("ctl-run").textContent = run ? `· ${run.label || run.id}` : "";
   setLiveOscillation(run ? run.oscillation : null);
@@ -23,7 +23,7 @@ function setControls(run) {
 function fileLinks(run) {
   const f = run.files || {}, base = `/api/runs/${run.id}`;
   const links = [];
-  if (f.timeseries || LIVE.includes(run.status)) {
+  if (f.timeseries || going(run)) {
     links.push(`<a href="${base}/export.csv" download>CSV</a>`, `<a href="${base}/report.pdf" download>report PDF</a>`,
       `<a href="${base}/report.png" download>report PNG</a>`);
   }
@@ -31,7 +31,7 @@ function fileLinks(run) {
   if (f.recording) links.push(`<a href="${base}/recording" download title="rerun recording: rerun FILE">rrd</a>`);
   if (state.health && state.health.viser_url) links.push(`<a href="${state.health.viser_url}" target="_blank" rel="noopener">3D view</a>`);
   if (run.links && run.links.rerun) {
-    const what = LIVE.includes(run.status) ? "the live stream in the rerun web viewer" : "the recording in the rerun web viewer";
+    const what = going(run) ? "the live stream in the rerun web viewer" : "the recording in the rerun web viewer";
     links.push(`<a href="${esc(run.links.rerun)}" target="_blank" rel="noopener" title="${what}">Open in rerun</a>`);
   }
   return links.join(" ");
@@ -50,10 +50,11 @@ function describeFurnace(run) {
 
 function renderRunInfo(run) {
   const sc = run.scenario;
-  const now = LIVE.includes(run.status) ? "now" : "at the end";
+  const now = going(run) ? "now" : "at the end";
   $("run-title").textContent = `· ${run.label ? `${run.label} · ` : ""}${run.id}`;
   $("run-details").innerHTML = `
-    <div><span class="badge ${esc(run.status)}">${esc(run.status)}</span>${run.error ? ` <span class="msg err">${esc(run.error)}</span>` : ""}
+    <div><span class="badge ${esc(run.status)}">${esc(run.status)}</span>${run.error ? ` <span class="msg err">${esc(run.error)}</span>`
+      : (run.status_reason ? ` <span class="msg${run.status === "degraded" ? " err" : ""}">${esc(run.status_reason)}</span>` : "")}
       · started ${new Date((run.started_at || run.created_at) * 1000).toLocaleString()}</div>
     <div>reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})</div>
     ${sc.estimator ? `<div class="muted">estimator ${esc(describeChoice(sc.estimator))}${sc.estimator.shadow
@@ -129,7 +130,7 @@ export async function selectRun(runId) {
   await refreshRun(true);
   const run = state.run;
   if (!run || run.id !== runId) return;
-  if (LIVE.includes(run.status)) await connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
+  if (going(run)) await connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
   await loadHistory(runId);
   if (state.runId !== runId) return;
   state.loading = false;

@@ -1,7 +1,7 @@
 // The list of runs (the "Runs & comparison" view) and the Show menu: label (editable), start time,
 // reference, oscillation, status, steady-state errors, files, delete; a filter; ticks for the comparison.
 import { api } from "./api.js";
-import { $, esc, fmt, LIVE, pct, runName, shortReference, showMsg } from "./page.js";
+import { $, esc, fmt, going, pct, runName, shortReference, showMsg } from "./page.js";
 import { state } from "./state.js";
 
 let tableHtml = null, pickHtml = null;
@@ -16,7 +16,7 @@ const matches = (r, words) => {
 };
 
 function row(r) {
-  const m = r.metrics || {}, base = `/api/runs/${r.id}`, live = LIVE.includes(r.status);
+  const m = r.metrics || {}, base = `/api/runs/${r.id}`, live = going(r);
   const when = new Date((r.started_at || r.created_at) * 1000);
   const files = `<a href="${base}/export.csv" download>csv</a><a href="${base}/report.pdf" download>pdf</a>`
     + `<a href="${base}/timeseries" download>npz</a><a href="${base}/recording" download>rrd</a>`

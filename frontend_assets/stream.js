@@ -17,7 +17,7 @@ export function applyFrame(f) {
   $("run-clock").textContent = `t = ${fmt(f.t)} s${f.late_samples ? ` · ${f.late_samples} late` : ""}`;
   addEvents(f.event_log);
   if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
-  if (f.status && !LIVE.includes(f.status)) noteStatus(f.status, f.t);
+  if (f.status && !LIVE.includes(f.status) && f.status !== "degraded") noteStatus(f.status, f.t); // degraded: blind, going
   state.dirty = true;
 }
 

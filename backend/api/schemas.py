@@ -82,7 +82,10 @@ class ChangeResult(BaseModel):
 
 class RunSummary(BaseModel):
     id: str
-    status: str = Field(description="queued, starting, running, finished, stopped, interrupted or error")
+    status: str = Field(description="queued, starting, running, degraded (going, but no thermocouple reading has "
+                                    "reached the estimate for a while), or how it ended: finished, degraded (blind "
+                                    "at its end), stopped, plant_lost, interrupted or error")
+    status_reason: str | None = Field(None, description="why: the outages of a run, the blind spell, the error")
     created_at: float = Field(description="unix s")
     started_at: float | None = None
     ended_at: float | None = None

@@ -23,7 +23,7 @@ from backend.core.settings import Settings
 from backend.runs.checks import RunChecks
 from backend.runs.types import LimitExceeded
 from backend.runs.worker import LoopFactory, RunWorker
-from backend.storage.repository import RunRepository
+from backend.storage.repository import DEGRADED, RunRepository
 from backend.streaming.fanout import StreamHub
 from backend.streaming.frames import SnapshotLike, frame_extra, frame_json
 from twin.config import FurnaceConfig
@@ -33,6 +33,7 @@ from twin.furnace.interface import FurnaceLost
 log = logging.getLogger("backend.runs.manager")  # the manager's log, as before the split
 
 ADVANCE_BUDGET_S = 0.05  # wall s of stepping per executor call: bounds frame latency at speed max
+RUNNING = "running"
 
 
 class _StoppedWhileQueued(Exception):
@@ -109,6 +110,8 @@ class RunDriver:
             while True:
                 adv = await aio.run_in_executor(run.executor, w.advance, ADVANCE_BUDGET_S)
                 now = time.monotonic()
+                if run.status in (RUNNING, DEGRADED):  # degraded while no TC reading reaches the estimate
+                    run.status = DEGRADED if getattr(w.latest, "blind_since", None) is not None else RUNNING
                 if every_sample:  # the samples come slower than the frame cap: send each one
                     for snap, seq, wall in adv.samples:
                         run.hub.publish(self._frame(run_id, run, snap, seq, wall, run.status))
@@ -160,8 +163,9 @@ class RunDriver:
                 await asyncio.shield(aio.run_in_executor(run.executor, w.finalize, final, error))
             except Exception:
                 log.exception("run %s: finalising failed", run_id)
+            final, reason = w.ending or (final, error)  # a run that finished blind ended degraded
             run.status = final
-            self._repo.set_status(run_id, final, error=error)
+            self._repo.set_status(run_id, final, error=error, reason=reason)
             if w.latest is not None:
                 run.hub.publish(self._frame(run_id, run, w.latest, w.seq, w.latest_wall, final))
             run.hub.close()

@@ -15,7 +15,7 @@ from twin.events import RunEvent
 
 #: what a run's own end is called in its events
 END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
-             "error": "run failed", "plant_lost": "run lost its furnace"}
+             "error": "run failed", "plant_lost": "run lost its furnace", "degraded": "run ended blind"}
 
 
 def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
@@ -25,10 +25,13 @@ def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
     ('run stopped at t = 12.3 s', 'error')
     >>> end_event("plant_lost", 40.3, "the link to the furnace was lost").level
     'error'
+    >>> end_event("degraded", 240.0, "blind from t = 197.0 s to the end").level
+    'warn'
     """
     words = END_WORDS.get(status, f"run {status}")
     at = f" at t = {t:.1f} s" if status != "finished" else ""
-    level = "error" if status in ("error", "plant_lost") else ("warn" if status == "interrupted" else "info")
+    level = "error" if status in ("error", "plant_lost") else ("warn" if status in ("interrupted", "degraded")
+                                                               else "info")
     return RunEvent(float(t), f"{words}{at}{f': {error}' if error else ''}", level)
 
 

@@ -48,7 +48,7 @@ from backend.runs.types import (  # noqa: F401  (re-exported: the routes and the
 )
 from backend.runs.worker import LoopFactory, RunWorker
 from backend.storage.data_dir import DataDir, run_bytes
-from backend.storage.repository import ACTIVE_STATUSES, ChangeRow, RunRepository, RunRow, clean_label
+from backend.storage.repository import ACTIVE_STATUSES, DEGRADED, ChangeRow, RunRepository, RunRow, clean_label
 from backend.storage.run_files import RunFiles, write_json_atomic
 from backend.streaming.fanout import StreamHub
 from twin.config import FurnaceConfig
@@ -133,7 +133,7 @@ class RunManager(RunDriver):
             notes = ()
         self._check_plant_free(scenario)
         await self.checks.plant(scenario)
-        running = sum(1 for a in self._runs.values() if a.status in ACTIVE_STATUSES)
+        running = sum(1 for a in self._runs.values() if a.status in (*ACTIVE_STATUSES, DEGRADED))
         if running >= self.settings.max_concurrent_runs:
             raise TooManyRuns(f"{running} runs are going; this server allows "
                               f"{self.settings.max_concurrent_runs} at once: stop one or wait")
@@ -196,7 +196,7 @@ class RunManager(RunDriver):
         cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
-        if run.status not in ("starting", "running") or run.worker.stop_requested.is_set():
+        if run.status not in ("starting", "running", DEGRADED) or run.worker.stop_requested.is_set():
             raise RunNotActive(f"run {run_id} is {run.status}")
         notes: tuple[str, ...] = ()
         if kind == "reference":  # from the current estimate: the mean now, from the next sample on

@@ -287,6 +287,11 @@ class ProcessLoop:
         (``twin.runs.series_store``), from the child."""
         self._call("append_series", folder)
 
+    def ending(self, end: str, error: str | None = None) -> tuple[str, str | None]:
+        """The run's status and reason as the child's loop knows them (a run that finished blind: degraded)."""
+        status, reason = self._call("ending", end, error)
+        return str(status), reason
+
     def metrics(self) -> dict[str, Any]:
         got: dict[str, Any] = self._call("metrics")
         return got

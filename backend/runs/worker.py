@@ -42,6 +42,7 @@ from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.events import RunEvent, event_arrays, event_level
 from twin.physics.fillet import Fillet
+from twin.runs.outage import run_ending
 from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
 
@@ -130,6 +131,7 @@ class RunWorker(RunChanges):
         self.faults: list[FaultSpec] = list(scenario.faults)
         self.fault_events: list[dict[str, Any]] = []
         self.latest: SnapshotLike | None = None
+        self.ending: tuple[str, str | None] | None = None  # (status, status_reason) once finalised
         self.latest_wall = 0.0
         self.seq = 0
         self.stop_requested = threading.Event()
@@ -294,12 +296,29 @@ class RunWorker(RunChanges):
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 
+    def _ending(self, status: str, error: str | None) -> tuple[str, str | None]:
+        """The run's status and its reason (``twin.runs.outage.run_ending``: a run that finished blind ended
+        ``degraded``), from the loop that knows when it ran blind."""
+        t_end = float(self.latest.t) if self.latest is not None else 0.0
+        ending = getattr(self.loop, "ending", None)
+        if callable(ending) and self.latest is not None:
+            try:
+                got = ending(status, error)
+                return str(got[0]), got[1]
+            except Exception:
+                log.exception("run %s: its ending failed", self.run_id)
+        return run_ending(status, error, None, t_end)
+
     def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
         """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
-        far (``None`` entries where a window was not reached)."""
+        far (``None`` entries where a window was not reached) with ``status`` and ``status_reason``
+        (:attr:`ending`: a run that was blind at its end ended ``degraded``)."""
         self._add_queued()
         if status is not None:
-            end = end_event(status, float(self.latest.t) if self.latest is not None else 0.0, error)
+            self.ending = self._ending(status, error)
+            final, reason = self.ending
+            end = end_event(final, float(self.latest.t) if self.latest is not None else 0.0,
+                            reason if final == "degraded" else error)
             self.add_event(end.t, end.text, end.level)
         metrics: dict[str, Any] | None = None
         if self.loop is not None and self.latest is not None:
@@ -308,6 +327,8 @@ class RunWorker(RunChanges):
             except Exception:
                 log.exception("run %s: metrics failed", self.run_id)
         if metrics is not None:
+            if self.ending is not None:
+                metrics.update(status=self.ending[0], status_reason=self.ending[1])
             write_json_atomic(self.files.metrics, metrics)
         try:
             self.flush(metrics)

@@ -18,6 +18,7 @@ from twin.runs.record import load_arrays
 from twin.runs.series_store import consolidate, has_parts
 
 log = logging.getLogger(__name__)
+INTERRUPTED_REASON = "the server stopped while the run was going"  # as the run record says (mark_interrupted)
 
 
 def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
@@ -39,7 +40,8 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
         if not files.timeseries.is_file():
             continue
         try:
-            metrics = json_safe(run_metrics(load_arrays(files.timeseries)))
+            metrics = json_safe({**run_metrics(load_arrays(files.timeseries)), "status": "interrupted",
+                                 "status_reason": INTERRUPTED_REASON})
         except Exception as exc:  # a file from an older layout: keep the run, say why
             log.warning("run %s: no metrics from %s: %s", run_id, files.timeseries, exc)
             continue

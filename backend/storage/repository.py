@@ -41,12 +41,15 @@ CREATE TABLE IF NOT EXISTS changes (
 CREATE INDEX IF NOT EXISTS changes_run ON changes(run_id);
 """
 #: columns added after the first release: (name, SQL type); added to an older database when it is opened
-_ADDED_COLUMNS = (("label", "TEXT"),)
+_ADDED_COLUMNS = (("label", "TEXT"), ("status_reason", "TEXT"))
 MAX_LABEL_CHARS = 80
 
 ACTIVE_STATUSES = ("queued", "starting", "running")
+#: a going run's status while no thermocouple reading reaches its estimate: live only (this server's, the frames');
+#: the database keeps it "running" until it ends, and a run that ended blind is stored "degraded" (an ending)
+DEGRADED = "degraded"
 #: the columns of a RunRow, in its order (named: an older database has its added columns last, in any order)
-_RUN_COLUMNS = "id, scenario, status, created_at, started_at, ended_at, latest, metrics, error, label"
+_RUN_COLUMNS = "id, scenario, status, created_at, started_at, ended_at, latest, metrics, error, label, status_reason"
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,7 @@ class RunRow:
     metrics: dict[str, Any] | None
     error: str | None
     label: str | None = None
+    status_reason: str | None = None  # why the run ended so (twin.runs.outage.run_ending), once it ended
 
 
 @dataclass(frozen=True)
@@ -123,7 +127,8 @@ class RunRepository:
             (run_id, scenario_json, status, time.time()),
         )
 
-    def set_status(self, run_id: str, status: str, *, error: str | None = None) -> None:
+    def set_status(self, run_id: str, status: str, *, error: str | None = None, reason: str | None = None) -> None:
+        """A status change; an ending (any status but the active ones) with its end time, error and reason."""
         now = time.time()
         if status == "running":
             self._exec("UPDATE runs SET status=?, started_at=? WHERE id=?", (status, now, run_id))
@@ -131,8 +136,9 @@ class RunRepository:
             self._exec("UPDATE runs SET status=? WHERE id=?", (status, run_id))
         else:
             self._exec(
-                "UPDATE runs SET status=?, ended_at=?, error=COALESCE(?, error) WHERE id=?",
-                (status, now, error, run_id),
+                "UPDATE runs SET status=?, ended_at=?, error=COALESCE(?, error), "
+                "status_reason=COALESCE(?, status_reason) WHERE id=?",
+                (status, now, error, reason, run_id),
             )
 
     def save_progress(
@@ -191,7 +197,8 @@ class RunRepository:
         for run_id in ids:
             self._exec(
                 "UPDATE runs SET status='interrupted', ended_at=COALESCE(ended_at, ?), "
-                "error=COALESCE(error, 'the server stopped while the run was going') WHERE id=?",
+                "error=COALESCE(error, 'the server stopped while the run was going'), "
+                "status_reason=COALESCE(status_reason, 'the server stopped while the run was going') WHERE id=?",
                 (time.time(), run_id),
             )
         return ids
@@ -226,5 +233,5 @@ class RunRepository:
     def _run(r: tuple[Any, ...]) -> RunRow:
         return RunRow(
             id=r[0], scenario=json.loads(r[1]), status=r[2], created_at=r[3], started_at=r[4],
-            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8], label=r[9],
+            ended_at=r[5], latest=_loads(r[6]), metrics=_loads(r[7]), error=r[8], label=r[9], status_reason=r[10],
         )

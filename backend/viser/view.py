@@ -54,8 +54,8 @@ def run_label(row: RunRow) -> str:
     return f"{row.id} · {when} · {what}{osc}"
 
 
-def status_text(snap: SnapshotLike, run_id: str, status: str) -> str:
-    where = "" if status in ACTIVE_STATUSES else " (last sample)"
+def status_text(snap: SnapshotLike, run_id: str, status: str, live: bool | None = None) -> str:
+    where = "" if (status in ACTIVE_STATUSES if live is None else live) else " (last sample)"
     return (
         f"**run `{run_id}`** · {status}  \n t = {snap.t:.1f} s{where} · η = {1000 * float(snap.eta):.1f} mm  \n"
         f"T_ref = {snap.T_ref:.1f} K · mean (est.) = {snap.T_mean_hat:.1f} K"
@@ -278,7 +278,7 @@ class FurnaceView:
             sample = self.manager.latest(run_id)
             if sample is not None and (run_id != self._shown_id or sample.seq != self._last_seq):
                 self._last_seq, self._static_key = sample.seq, None
-                self.show(sample.snapshot, run_id, sample.status)
+                self.show(sample.snapshot, run_id, sample.status, live=True)
             elif sample is None and run_id != self._shown_id:
                 self._shown_id = run_id
                 self.gui.status.content = f"**run `{run_id}`** · {status} (building the controller…)"
@@ -314,12 +314,12 @@ class FurnaceView:
                 log.exception("viser update failed")
             self._stop.wait(max(period - (time.monotonic() - t0), 0.0))
 
-    def show(self, snap: SnapshotLike, run_id: str, status: str) -> None:
-        """Put one snapshot on the scene and its run's status on the panel."""
+    def show(self, snap: SnapshotLike, run_id: str, status: str, live: bool | None = None) -> None:
+        """Put one snapshot on the scene and its run's status on the panel (``live``: a going run's sample)."""
         assert self.scene is not None and self.gui is not None
         lo, hi = self.scene.show(snap, self.cfg.tc_positions(self._tc4(run_id)))
         self._shown_id = run_id
-        self.gui.status.content = status_text(snap, run_id, status)
+        self.gui.status.content = status_text(snap, run_id, status, live)
         self.gui.legend.content = f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)"
 
     def _tc4(self, run_id: str) -> tuple[float, float] | None:

@@ -75,6 +75,7 @@ def test_reduced_campaign_writes_every_seed(campaign):
             folder = out / e["name"] / f"seed_{s['seed']}"
             assert s["out"] == str(folder)
             saved = json.loads((folder / "metrics.json").read_text())
+            assert (saved.pop("status"), saved.pop("status_reason")) == ("finished", None)  # how it ended
             flat = {k: v for k, v in saved.items() if not isinstance(v, dict)}
             assert flat == pytest.approx({k: s["metrics"][k] for k in flat}, nan_ok=True)
             # the default estimator calibrates: its parameters at the end, as in the run's metrics.json

@@ -143,7 +143,10 @@ def test_emulator_killed_mid_run_ends_plant_lost_with_its_data(tmp_path) -> None
         t = npz["t"]
         assert len(t) >= 20 and t[-1] >= 2.0
         assert (npz["tc_status"][-5:] == 2).all()  # its last samples: nothing came
-        assert c.get(f"/api/runs/{run_id}/metrics").status_code == 200
+        metrics = c.get(f"/api/runs/{run_id}/metrics")
+        assert metrics.status_code == 200 and metrics.json()["status"] == "plant_lost"  # the ending, not only a code
+        assert metrics.json()["status_reason"] == body["status_reason"]
+        assert body["status_reason"].startswith(body["error"]) and "blind once" in body["status_reason"], body
         assert c.get(f"/api/runs/{run_id}/recording").status_code == 200
         events = dict(zip((str(e) for e in npz["event_text"]), (str(v) for v in npz["event_level"]), strict=True))
         lost = [e for e in events if "link to the furnace lost" in e]

@@ -86,6 +86,7 @@ def test_metrics_are_recomputable_from_the_saved_series(tmp_path, small_radiatio
         else:
             assert a == pytest.approx(b, rel=1e-12, abs=1e-15), key
 
+    assert (saved.pop("status"), saved.pop("status_reason")) == ("finished", None)  # how it ended, not a metric
     for k, v in saved.items():
         same(again[k], v, k)
     assert result["out"] == str(tmp_path)

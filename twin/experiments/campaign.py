@@ -215,7 +215,7 @@ def run_campaign(
                 series[name] = ts
             runs.append({
                 "seed": seed,
-                "metrics": _json_safe({k: v for k, v in result.items() if k != "out"}),
+                "metrics": _json_safe({k: v for k, v in result.items() if k not in ("out", "status", "status_reason")}),
                 "model_error": _json_safe(open_loop_model_error(cfg, ts, rad)),
                 "out": str(folder),
             })

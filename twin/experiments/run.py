@@ -9,7 +9,9 @@ on stop or error, so a crash loses at most those seconds.
 A scenario whose ``plant`` is a furnace over OPC UA runs against it in real time (the furnace's clock
 paces the loop), with the link settings of ``FURNACE_TWIN_OPCUA_*`` and certificates under
 ``$FURNACE_TWIN_DATA_DIR/opcua`` (default ``furnace-data/opcua``).  A furnace lost during the run ends it
-with its data written and exit status 3.
+with its data written and exit status 3; a run still blind at its end (no thermocouple reading in the
+estimate, :mod:`twin.runs.outage`) ends ``degraded`` with exit status 4.  ``metrics.json`` says how every run
+ended (``status``, ``status_reason``).
 """
 
 from __future__ import annotations
@@ -55,13 +57,17 @@ def execute_run(
     figures: bool = True,
     flush_every_s: float = 10.0,
 ) -> dict[str, Any]:
-    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out`` (and ``status``
-    ``"plant_lost"`` with ``error`` if the furnace was lost: the data up to then is written all the same)."""
+    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out``, ``status`` and
+    ``status_reason`` (also in ``metrics.json``: ``finished``, ``degraded`` when it ended blind, ``plant_lost``
+    with ``error`` if the furnace was lost; the data up to then is written all the same).  A run that fails
+    (the estimate diverged, ...) or is interrupted (Ctrl-C) writes its data and ``metrics.json`` with status
+    ``error`` / ``stopped``, then raises."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
     sinks = [make(out, loop) for make in sink_factories]
     flush_every = max(1, int(round(flush_every_s / loop.t_s)))
-    lost: FurnaceLost | None = None
+    end, error = "finished", None
+    failure: BaseException | None = None
     try:
         for snap in loop.run():
             for sink in sinks:
@@ -72,22 +78,29 @@ def execute_run(
                     sink.flush()
     except FurnaceLost as exc:
         log.error("the furnace was lost: %s", exc)
-        lost = exc
+        end, error = "plant_lost", str(exc)
+    except KeyboardInterrupt as exc:
+        end, failure = "stopped", exc
+    except Exception as exc:
+        end, error, failure = "error", f"{type(exc).__name__}: {exc}", exc
     finally:
         ts = loop.timeseries()
         save_arrays(out / "timeseries.npz", ts)
         for sink in sinks:
             sink.close()
         loop.close()
-    metrics = loop.metrics()
+    status, reason = loop.ending(end, error)
+    metrics = {**loop.metrics(), "status": status, "status_reason": reason}
     (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
+    if failure is not None:
+        raise failure
     if figures and len(ts["t"]):
         from twin.experiments.figures import plot_run
 
         plot_run(ts, out)
     result: dict[str, Any] = {**metrics, "out": str(out)}
-    if lost is not None:
-        result.update(status="plant_lost", error=str(lost))
+    if error is not None:
+        result["error"] = error
     return result
 
 
@@ -139,4 +152,7 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
     if result.get("status") == "plant_lost":
         print(f"furnace-twin run: {result['error']}; the data so far is in {out}", file=sys.stderr)  # noqa: T201
         return 3
+    if result.get("status") == "degraded":  # it ended blind: not "all was well"
+        print(f"furnace-twin run: degraded: {result['status_reason']} (data in {out})", file=sys.stderr)  # noqa: T201
+        return 4
     return 0

@@ -18,7 +18,7 @@ from backend.api.schemas import (
     StopResult,
 )
 from backend.runs.manager import RunManager
-from backend.storage.repository import ACTIVE_STATUSES, RunRow
+from backend.storage.repository import ACTIVE_STATUSES, DEGRADED, RunRow
 from twin.runs.metrics import windows_from
 
 router = APIRouter(prefix="/api/runs", tags=["runs"])
@@ -36,7 +36,7 @@ def rerun_link(request: Request | None, manager: RunManager, run_id: str, state:
     viewer = None if request is None else getattr(request.app.state, "rerun_viewer", None)
     if viewer is None or request is None:
         return None
-    if state in ACTIVE_STATUSES and manager.live_url:
+    if (state in ACTIVE_STATUSES or manager.status(run_id) is not None) and manager.live_url:
         return str(viewer.link(manager.live_url))
     return str(viewer.link(f"{str(request.base_url).rstrip('/')}/api/runs/{run_id}/recording"))
 
@@ -51,11 +51,19 @@ def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
     return {**scenario, "reference": {"points": len(pts), "t_E": pts[-1][0], "setpoint": pts[-1][1]}}
 
 
+def live_reason(manager: RunManager, run_id: str, state: str) -> str | None:
+    """Why a going run is degraded: since when no thermocouple reading reaches its estimate."""
+    sample = manager.latest(run_id) if state == DEGRADED else None
+    since = getattr(sample.snapshot, "blind_since", None) if sample is not None else None
+    return None if since is None else f"blind since t = {since:.1f} s: no thermocouple reading reaches the estimate"
+
+
 def summary(row: RunRow, manager: RunManager, *, whole: bool = True, request: Request | None = None) -> RunSummary:
     state = manager.status(row.id) or row.status
     return RunSummary(
         id=row.id,
         status=state,
+        status_reason=row.status_reason if manager.status(row.id) is None else live_reason(manager, row.id, state),
         created_at=row.created_at,
         started_at=row.started_at,
         ended_at=row.ended_at,
