@@ -47,15 +47,23 @@ def twin(port: int, certs, **options) -> OpcUaFurnace:
 def test_sign_and_encrypt_with_certificates_trusted_both_ways(secure_emulator) -> None:
     e = secure_emulator
     certs = e.folder / "twin" / "opcua"
-    # first use: this twin makes its certificate; the emulator does not know it yet
-    with pytest.raises(FurnaceUnavailable, match="certificate is not trusted"):
-        twin(e.port, certs)
+    # first use: this twin makes its certificate; the emulator does not know it yet.  One sentence that names
+    # the certificate to trust and this twin's trust folder
     own_cert, own_key = certs / "twin-cert.der", certs / "twin-key.pem"
+    with pytest.raises(FurnaceUnavailable) as refused:
+        twin(e.port, certs)
+    assert str(refused.value) == (
+        f"{endpoint(e.port)} refused this twin's certificate {own_cert} (BadCertificateUntrusted): add it to the "
+        f"trusted certificates of the furnace's OPC UA server (this twin trusts the furnace's certificate once it "
+        f"is in {certs / 'trusted'})")
     assert own_cert.is_file() and stat.S_IMODE(own_key.stat().st_mode) == 0o600
     assert (e.emu_certs / "emulator-cert.der").is_file()
     shutil.copy(own_cert, e.emu_certs / "trusted" / "twin.der")  # the furnace trusts the twin ...
-    with pytest.raises(FurnaceUnavailable, match="certificate is not trusted"):
-        twin(e.port, certs)  # ... but the twin does not trust the furnace yet
+    with pytest.raises(FurnaceUnavailable, match="this twin does not trust the certificate of") as untrusted:
+        twin(e.port, certs)  # ... but the twin does not trust the furnace yet: it keeps what it refused
+    (saved,) = (certs / "rejected").glob("*.der")
+    assert saved.read_bytes() == (e.emu_certs / "emulator-cert.der").read_bytes()
+    assert f"saved as {saved}" in str(untrusted.value) and f"move it into {certs / 'trusted'}" in str(untrusted.value)
     shutil.copy(e.emu_certs / "emulator-cert.der", certs / "trusted" / "emulator.der")
     furnace = twin(e.port, certs)
     try:
@@ -67,9 +75,9 @@ def test_sign_and_encrypt_with_certificates_trusted_both_ways(secure_emulator) -
         furnace.close()
     with pytest.raises(FurnaceUnavailable, match="refused the user name or password"):
         twin(e.port, certs, password="wrong")
-    with pytest.raises(FurnaceUnavailable, match="user name or password|does not accept"):
+    with pytest.raises(FurnaceUnavailable, match="user name or password|does not offer"):
         twin(e.port, certs, username=None, password=None)  # anonymous: refused
-    with pytest.raises(FurnaceUnavailable, match="does not accept security 'none'"):
+    with pytest.raises(FurnaceUnavailable, match="does not offer security 'none'"):
         twin(e.port, certs, security="none")
 
 

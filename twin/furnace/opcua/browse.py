@@ -88,33 +88,39 @@ async def _exists(node: Any) -> bool:
     return True
 
 
-async def resolve(client: Any, node_map: NodeMap) -> dict[str, ResolvedNode]:
-    """Every node of ``node_map`` on the connected ``client``; :class:`MissingNodes` if any is absent."""
+async def locate(client: Any, node_map: NodeMap) -> dict[str, ResolvedNode | str]:
+    """Each node of ``node_map`` (and the optional ones that exist) on the connected ``client``, or for a node
+    that is not there, where it was looked for and why it was not found.  The furnace object missing is a
+    :class:`MissingNodes` error (nothing below it can be looked for)."""
     browser = _Browser(await _namespace_index(client, node_map.namespace))
     furnace = await browser.walk(client.nodes.objects, node_map.object_path)
     if furnace is None:
         raise MissingNodes(f"the server has no object {'/'.join(node_map.object_path)} under Objects "
                            f"(mapping: {node_map.source})")
-    found: dict[str, ResolvedNode] = {}
-    missing: list[str] = []
+    found: dict[str, ResolvedNode | str] = {}
     for name, spec in node_map.nodes.items():
         if spec.node_id is not None:
             try:
                 node = client.get_node(await node_id(client, spec.node_id))
             except MissingNodes as exc:
-                missing.append(f"{node_map.describe(name)}: {exc}")
+                found[name] = f"{node_map.describe(name)}: {exc}"
                 continue
             node = node if await _exists(node) else None
         else:
             node = await browser.walk(furnace, spec.path or ())
-        if node is None:
-            missing.append(node_map.describe(name))
-            continue
-        found[name] = ResolvedNode(node, await node.read_data_type_as_variant_type())
-    if missing:
-        raise MissingNodes("the furnace lacks " + "; ".join(missing))
+        found[name] = node_map.describe(name) if node is None else \
+            ResolvedNode(node, await node.read_data_type_as_variant_type())
     for name in OPTIONAL:
         node = await browser.walk(furnace, (name,))
         if node is not None:
             found[name] = ResolvedNode(node, await node.read_data_type_as_variant_type())
     return found
+
+
+async def resolve(client: Any, node_map: NodeMap) -> dict[str, ResolvedNode]:
+    """Every node of ``node_map`` on the connected ``client``; :class:`MissingNodes` if any is absent."""
+    located = await locate(client, node_map)
+    missing = [v for v in located.values() if isinstance(v, str)]
+    if missing:
+        raise MissingNodes("the furnace lacks " + "; ".join(missing))
+    return {name: v for name, v in located.items() if isinstance(v, ResolvedNode)}

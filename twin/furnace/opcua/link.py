@@ -24,10 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from twin.furnace.opcua.browse import MissingNodes, ResolvedNode, resolve
+from twin.furnace.opcua import messages
+from twin.furnace.opcua.browse import ResolvedNode, resolve
 from twin.furnace.opcua.nodes import NodeMap
 from twin.furnace.opcua.options import OpcUaOptions
-from twin.furnace.opcua.security import secure_client, trusted_dir
+from twin.furnace.opcua.security import secure_client
 
 log = logging.getLogger(__name__)
 
@@ -58,36 +59,8 @@ class LinkSettings:
 
 
 def explain(exc: BaseException, s: LinkSettings) -> str:
-    """A user's message for a failed connection or request."""
-    from asyncua import ua
-
-    name = type(exc).__name__
-    if isinstance(exc, MissingNodes):
-        return f"{s.endpoint}: {exc}"
-    if isinstance(exc, ConnectionRefusedError):
-        return f"cannot reach {s.endpoint}: connection refused (is the furnace's OPC UA server running?)"
-    if isinstance(exc, TimeoutError):
-        return f"no answer from {s.endpoint} within {s.options.connect_timeout_s:g} s"
-    if isinstance(exc, OSError):
-        return f"cannot reach {s.endpoint}: {exc.strerror or exc}"
-    if isinstance(exc, ua.UaStatusCodeError):
-        code = exc.code
-        if code == ua.StatusCodes.BadCertificateUntrusted:
-            return (f"{s.endpoint}: a certificate is not trusted: the furnace must trust this twin's "
-                    f"{s.cert_dir / 'twin-cert.der'}, and this twin the furnace's (put it in "
-                    f"{trusted_dir(s.cert_dir)})")
-        if code in (ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenRejected,
-                    ua.StatusCodes.BadIdentityTokenInvalid):
-            return (f"{s.endpoint} refused the user name or password (FURNACE_TWIN_OPCUA_USERNAME / _PASSWORD): "
-                    f"{name}")
-        if code in (ua.StatusCodes.BadSecurityPolicyRejected, ua.StatusCodes.BadSecurityModeRejected,
-                    ua.StatusCodes.BadSecurityChecksFailed):
-            return (f"{s.endpoint} does not accept security {s.options.security!r} "
-                    f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): {name}")
-    if isinstance(exc, ua.UaError) and "No matching endpoints" in str(exc):
-        return (f"{s.endpoint} does not accept security {s.options.security!r} "
-                f"(FURNACE_TWIN_OPCUA_SECURITY: none or sign-encrypt): it offers no such endpoint")
-    return f"{s.endpoint}: {name}: {exc}"
+    """A user's message for a failed connection or request (:func:`twin.furnace.opcua.messages.explain`)."""
+    return messages.explain(exc, s.endpoint, s.options, s.cert_dir)
 
 
 def _unix_s(stamp: Any) -> float | None:
@@ -151,7 +124,13 @@ class FurnaceLink:
         client = Client(self.s.endpoint, timeout=o.connect_timeout_s, watchdog_intervall=1.0)
         await secure_client(client, security=o.security, cert_dir=self.s.cert_dir, username=o.username,
                             password=o.secret())
-        await asyncio.wait_for(client.connect(), timeout=o.connect_timeout_s)
+        try:
+            await asyncio.wait_for(client.connect(), timeout=o.connect_timeout_s)
+        except Exception as exc:
+            refused = getattr(client.certificate_validator, "refused", None)  # this twin refused the server's
+            if refused is not None:
+                raise messages.UntrustedServer(*refused) from exc
+            raise
         try:
             nodes = await resolve(client, self.s.node_map)
             channel_of = {nodes[name].node.nodeid: i for i, name in enumerate(self.s.channels)}

@@ -119,16 +119,46 @@ def ensure_identity(cert_dir: str | Path, role: Role, hosts: tuple[str, ...] = (
     return ident
 
 
+def rejected_dir(cert_dir: str | Path) -> Path:
+    """Where a side keeps the peer certificates it refused (to inspect, and move into ``trusted/``)."""
+    return Path(cert_dir) / "rejected"
+
+
 class TrustedPeers:
     """A certificate check (asyncua's ``certificate_validator``): the peer's certificate must be valid now,
     name the peer's application URI and be one of the certificates in ``trusted/`` (re-read at every
-    connection, so a copied certificate counts without a restart)."""
+    connection, so a copied certificate counts without a restart).  A refused certificate is saved in
+    ``rejected/`` (its SHA-1 thumbprint as the name); ``refused`` is (that file, its subject) until the next
+    check."""
 
     def __init__(self, cert_dir: str | Path, peer: Literal["client", "server"]) -> None:
         self.folder = trusted_dir(cert_dir)
+        self.rejected = rejected_dir(cert_dir)
         self.peer = peer
+        self.refused: tuple[Path | None, str] | None = None
+
+    def _refuse(self, cert: Any) -> None:
+        from cryptography.hazmat.primitives import hashes
+        from cryptography.hazmat.primitives.serialization import Encoding
+
+        subject = cert.subject.rfc4514_string()
+        saved: Path | None = self.rejected / f"{cert.fingerprint(hashes.SHA1()).hex()}.der"
+        try:
+            self.rejected.mkdir(parents=True, exist_ok=True)
+            _write_atomic(saved, cert.public_bytes(Encoding.DER), 0o644)  # type: ignore[arg-type]
+        except OSError:
+            saved = None
+        self.refused = (saved, subject)
 
     async def __call__(self, cert: Any, app_description: Any) -> None:
+        self.refused = None
+        try:
+            await self._check(cert, app_description)
+        except BaseException:
+            self._refuse(cert)
+            raise
+
+    async def _check(self, cert: Any, app_description: Any) -> None:
         from asyncua import ua
         from asyncua.common.utils import ServiceError
         from asyncua.crypto.truststore import TrustStore
