@@ -1,5 +1,5 @@
 """The ``furnace-twin`` command line (product.md): serve, precompute, simulate, run, campaign, bench, study,
-emulate.
+emulate, opcua-check.
 
 Each sub-command lives in its own module and is imported only when used, so
 ``furnace-twin --help`` stays fast.  User errors (bad config, bad scenario file,
@@ -103,6 +103,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     emulate_arguments(s)
 
+    s = sub.add_parser("opcua-check", help="browse a furnace's OPC UA server: each node the twin needs, its NodeId, "
+                                           "type and access (writes nothing)")
+    from twin.furnace.opcua.check import add_arguments as check_arguments
+
+    check_arguments(s)
+
     s = sub.add_parser("study", help="a design study (grid and/or Monte Carlo of runs) on Dask distributed")
     s.add_argument("file", help="study TOML file (product.md: furnace, [base], [grid], [monte_carlo])")
     s.add_argument("--out", default=None, help="study folder (default out/studies/<file name>); re-run to resume")
@@ -176,6 +182,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.furnace.emulator.command import emulate_command
 
             return emulate_command(cfg, args)
+        if args.command == "opcua-check":
+            from twin.furnace.opcua.check import check_command
+
+            return check_command(cfg, args)
         if args.command == "study":
             from twin.studies.command import study_command
 

@@ -39,6 +39,7 @@ log = logging.getLogger(__name__)
 Role = Literal["twin", "emulator"]
 APPLICATION_URI: dict[str, str] = {"twin": "urn:furnace-twin:twin", "emulator": "urn:furnace-twin:emulator"}
 CERT_DAYS = 3650
+SESSION_TIMEOUT_MS = 600_000  # what servers commonly grant (asyncua asks for an hour and warns when revised)
 
 
 @dataclass(frozen=True)
@@ -190,6 +191,7 @@ async def secure_client(client: Any, *, security: str, cert_dir: str | Path, use
 
     client.application_uri = APPLICATION_URI["twin"]
     client.name = client.description = "furnace-twin"
+    client.session_timeout = SESSION_TIMEOUT_MS
     if security == "sign-encrypt":
         ident = ensure_identity(cert_dir, "twin")
         client.certificate_validator = TrustedPeers(cert_dir, "server")
