@@ -129,9 +129,20 @@ def create_app(
             else:
                 viewer = None
         app.state.rerun_viewer = viewer
+        results = None
+        if settings.opcua_results_endpoint:  # the twin's own results for the plant's SCADA (read-only)
+            from backend.streaming.opcua_results import ResultsServer
+            from twin.furnace.opcua.options import certificate_dir
+
+            results = ResultsServer(manager, settings.opcua_results_endpoint, settings.opcua,
+                                    certificate_dir(settings.data_dir))
+            await asyncio.to_thread(results.start)
+        app.state.opcua_results = results
         try:
             yield
         finally:
+            if results is not None:
+                await asyncio.to_thread(results.stop)
             await manager.shutdown()
             await asyncio.to_thread(app.state.studies.shutdown)
             if scene is not None:

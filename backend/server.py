@@ -31,12 +31,15 @@ def serve(
     furnace: str | None = None,
     rerun_connect: str | None = None,
     rerun_web_port: int | None = None,
+    opcua_endpoint: str | None = None,
 ) -> int:
     """Run the server until interrupted; returns the process exit status.
 
     ``furnace`` is the ``--config`` value that ``cfg`` came from (its label in ``GET /api/furnace``).
     ``rerun_connect`` (or ``FURNACE_TWIN_RERUN_CONNECT``): every run also streams live to that rerun viewer
-    or gRPC proxy; ``rerun_web_port`` (default 9090, 0 = none): the rerun web viewer on loopback.
+    or gRPC proxy; ``rerun_web_port`` (default 9090, 0 = none): the rerun web viewer on loopback;
+    ``opcua_endpoint`` (or ``FURNACE_TWIN_OPCUA_RESULTS_ENDPOINT``): the twin's results served read-only over OPC UA
+    (:mod:`backend.streaming.opcua_results`).
     A non-loopback ``host`` is refused unless an API token is set
     (``FURNACE_TWIN_API_TOKEN``), so the furnace is never controllable from the network
     without one.
@@ -49,6 +52,8 @@ def serve(
         given["rerun_connect"] = rerun_connect
     if rerun_web_port is not None:
         given["rerun_web_port"] = rerun_web_port
+    if opcua_endpoint:
+        given["opcua_results_endpoint"] = opcua_endpoint
     try:
         settings = Settings(**given)  # type: ignore[arg-type]  # the rest from defaults / environment
     except ValidationError as exc:

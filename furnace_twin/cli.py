@@ -55,6 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "rerun+http://127.0.0.1:9876/proxy (or FURNACE_TWIN_RERUN_CONNECT)")
     s.add_argument("--rerun-web-port", type=int, default=None,
                    help="port of the rerun web viewer on loopback (default 9090; 0 = none)")
+    s.add_argument("--opcua-endpoint", default=None, metavar="URL",
+                   help="serve the twin's results read-only over OPC UA here, e.g. "
+                        "opc.tcp://127.0.0.1:4841/furnace-twin/results/ (off by default; security as "
+                        "FURNACE_TWIN_OPCUA_SECURITY)")
 
     s = sub.add_parser("precompute", help="radiation exchange factors for all eta positions (cached): the twin's "
                        "model's and the simulated furnace's own")
@@ -154,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return serve(cfg, host=args.host, port=args.port, viser_port=args.viser_port, data_dir=args.data_dir,
                          furnace=args.config or os.environ.get(CONFIG_ENV_VAR), rerun_connect=args.rerun_connect,
-                         rerun_web_port=args.rerun_web_port)
+                         rerun_web_port=args.rerun_web_port, opcua_endpoint=args.opcua_endpoint)
         if args.command == "precompute":
             from twin.furnace.simulated.truth import precompute_truth
             from twin.radiation.cache import precompute_command

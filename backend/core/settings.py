@@ -13,7 +13,7 @@ from __future__ import annotations
 import ipaddress
 from pathlib import Path
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from twin.furnace.opcua.options import OpcUaOptions
@@ -78,6 +78,9 @@ class Settings(BaseSettings):
     rerun_memory_limit: str = Field("2GiB", description="what the rerun viewer keeps; the oldest data goes first")
     opcua: OpcUaOptions = Field(default_factory=OpcUaOptions,
                                 description="furnaces over OPC UA (environment FURNACE_TWIN_OPCUA_*)")
+    opcua_results_endpoint: str | None = Field(
+        None, description="serve the twin's own results read-only at this opc.tcp:// endpoint "
+                          "(serve --opcua-endpoint); off by default; security as FURNACE_TWIN_OPCUA_SECURITY")
     study_workers: int | None = Field(None, ge=1, le=256,
                                       description="LocalCluster process workers of a study (default: one per core)")
     study_scheduler: str | None = Field(None, description="run studies on this Dask scheduler instead, "
@@ -92,6 +95,18 @@ class Settings(BaseSettings):
         if len(v) < MIN_TOKEN_LENGTH:
             raise ValueError(f"the API token must have at least {MIN_TOKEN_LENGTH} characters, got {len(v)}")
         return v or None
+
+    @model_validator(mode="after")
+    def _results_endpoint(self) -> Settings:
+        """The results server's endpoint is an opc.tcp:// URL; beyond loopback only with security."""
+        if self.opcua_results_endpoint:
+            from twin.endpoints import parse_endpoint
+
+            ep = parse_endpoint(self.opcua_results_endpoint)  # ValueError naming what is wrong
+            if self.opcua.security == "none" and not is_loopback(ep.host):
+                raise ValueError(f"serving the twin's results over OPC UA on {ep.host} (not a loopback address) "
+                                 "needs FURNACE_TWIN_OPCUA_SECURITY=sign-encrypt")
+        return self
 
     @property
     def reads_need_token(self) -> bool:

@@ -271,7 +271,7 @@ class RunManager(RunDriver):
             return None
         w = run.worker
         snap, seq = w.latest, w.seq
-        return None if snap is None else LiveSample(snap, seq, run.status)
+        return None if snap is None else LiveSample(snap, seq, run.status, w.latest_wall)
 
     def scenario(self, run_id: str) -> dict[str, Any]:
         """The run's scenario as it was started (JSON object)."""

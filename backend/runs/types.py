@@ -60,6 +60,7 @@ class LiveSample:
     snapshot: SnapshotLike
     seq: int
     status: str
+    wall_time: float = 0.0  # unix s when the sample was computed
 
 
 @dataclass(frozen=True)

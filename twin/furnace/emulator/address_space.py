@@ -4,8 +4,8 @@ by default, or the one a mapping file describes, so the twin's mapping can be tr
 Written values pass through setters: lamp-group setpoints are clamped to 0..1 (in twin units; a furnace
 unit from the mapping's scale and offset), the drive's amplitude to 0..eta_max and its period to
 1..600 s; a new watchdog value goes to the interlock.  TCs, ``Eta``, ``LampsEnabled`` and ``LockStep`` are
-read-only.  What a client is told about its write (OPC UA Part 4, 7.34): ``GoodClamped`` when a value was
-clamped, ``BadNotWritable`` for a read-only node; a value written with a Bad status is ignored (a watchdog
+read-only.  What a client is told about its write (:mod:`twin.furnace.opcua.writes`): ``GoodClamped`` when a
+value was clamped, ``BadNotWritable`` for a read-only node; a value written with a Bad status is ignored (a watchdog
 written Bad does not count as a sign of life, a setpoint written Bad switches its group off).
 
 A NodeId of the map may name its namespace by URI (``nsu=urn:lab:annealer;s=TE101``): the emulator
@@ -24,6 +24,7 @@ from typing import Any
 from twin.furnace.emulator.interlock import clamp_setpoint
 from twin.furnace.opcua import nodes as names
 from twin.furnace.opcua.nodes import NodeMap, NodeSpec
+from twin.furnace.opcua.writes import answer_writes
 from twin.scenario import OscillationSpec
 
 log = logging.getLogger(__name__)
@@ -136,31 +137,7 @@ class AddressSpace:
         self.nodes[names.LOCK_STEP] = await furnace.add_variable(idx, names.LOCK_STEP, bool(lock_step),
                                                                  varianttype=ua.VariantType.Boolean)
         self._names[self.nodes[names.LOCK_STEP].nodeid] = names.LOCK_STEP
-        self._answer_writes()
-
-    def _answer_writes(self) -> None:
-        """Wrap the server's Write service so that a client learns what became of its values: ``BadNotWritable``
-        for a read-only node (asyncua answers ``BadUserAccessDenied``), ``GoodClamped`` for a clamped value."""
-        from asyncua import ua
-
-        service = self.server.iserver.attribute_service
-        write = service.write
-
-        async def answered(params: Any, *args: Any, **kwargs: Any) -> list[Any]:
-            self._clamped.clear()
-            results = await write(params, *args, **kwargs)
-            out = []
-            for wv, res in zip(params.NodesToWrite, results, strict=True):
-                name = self._names.get(wv.NodeId)
-                if (name is not None and res.value == ua.StatusCodes.BadUserAccessDenied
-                        and wv.AttributeId == ua.AttributeIds.Value and not self._writable(name)):
-                    res = ua.StatusCode(ua.UInt32(ua.StatusCodes.BadNotWritable))
-                elif res.is_good() and wv.NodeId in self._clamped:
-                    res = ua.StatusCode(ua.UInt32(ua.StatusCodes.GoodClamped))
-                out.append(res)
-            return out
-
-        service.write = answered
+        answer_writes(self.server, self._names.get, self._writable, self._clamped)
 
     def _writable(self, name: str) -> bool:
         kind = self.kinds.get(name)

@@ -3,7 +3,8 @@
 Each side keeps, in its data directory's ``opcua/`` folder (:func:`twin.furnace.opcua.options.certificate_dir`):
 
 * its own self-signed application certificate ``<role>-cert.der`` and key ``<role>-key.pem`` (role
-  ``twin`` or ``emulator``), created on first use (:func:`ensure_identity`);
+  ``twin``, ``emulator``, or ``results``: the twin's own results server), created on first use
+  (:func:`ensure_identity`);
 * ``trusted/``: the peer certificates it accepts.  Neither side trusts a certificate it was not given:
   copy the emulator's ``emulator-cert.der`` into the twin's ``opcua/trusted/`` and the twin's
   ``twin-cert.der`` into the emulator's (a real furnace: into its server's trust list).
@@ -36,8 +37,9 @@ from asyncua.server.user_managers import UserManager
 
 log = logging.getLogger(__name__)
 
-Role = Literal["twin", "emulator"]
-APPLICATION_URI: dict[str, str] = {"twin": "urn:furnace-twin:twin", "emulator": "urn:furnace-twin:emulator"}
+Role = Literal["twin", "emulator", "results"]
+APPLICATION_URI: dict[str, str] = {"twin": "urn:furnace-twin:twin", "emulator": "urn:furnace-twin:emulator",
+                                   "results": "urn:furnace-twin:results"}
 CERT_DAYS = 3650
 SESSION_TIMEOUT_MS = 600_000  # what servers commonly grant (asyncua asks for an hour and warns when revised)
 
@@ -223,13 +225,15 @@ class PasswordUsers(UserManager):
         return User(role=UserRole.User, name=username)
 
 
-async def secure_server(server: Any, *, security: str, cert_dir: str | Path, host: str, with_users: bool) -> None:
-    """Configure an ``asyncua.Server`` (after ``init``, before ``start``): policy, certificate, identity tokens."""
+async def secure_server(server: Any, *, security: str, cert_dir: str | Path, host: str, with_users: bool,
+                        role: Role = "emulator") -> None:
+    """Configure an ``asyncua.Server`` (after ``init``, before ``start``): policy, certificate, identity tokens.
+    ``role``: the emulator's, or the twin's results server (``results-cert.der``)."""
     from asyncua import ua
 
-    await server.set_application_uri(APPLICATION_URI["emulator"])
+    await server.set_application_uri(APPLICATION_URI[role])
     if security == "sign-encrypt":
-        ident = ensure_identity(cert_dir, "emulator", hosts=(host,))
+        ident = ensure_identity(cert_dir, role, hosts=(host,))
         await server.load_certificate(str(ident.cert))
         await server.load_private_key(str(ident.key))
         server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
@@ -239,4 +243,16 @@ async def secure_server(server: Any, *, security: str, cert_dir: str | Path, hos
     else:
         raise ValueError(f"unknown OPC UA security {security!r} (none or sign-encrypt)")
     server.set_identity_tokens([ua.UserNameIdentityToken] if with_users else [ua.AnonymousIdentityToken])
+
+
+class ReadOnlyUsers(UserManager):
+    """An asyncua user manager for a server that only publishes (the twin's results): every session, anonymous
+    too, is a plain user, who may read, browse and subscribe but write nothing the server marks read-only and
+    add or delete no node (asyncua gives administrators every right)."""
+
+    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
+                 certificate: Any = None) -> Any:
+        from asyncua.crypto.permission_rules import User, UserRole
+
+        return User(role=UserRole.User, name=username)
 
