@@ -8,6 +8,10 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+# The peers of the interoperability tests run on o6 (open62541) in processes of their own: importing o6 starts a
+# timer that ends its process ten minutes later, so nothing of theirs may be imported here (--doctest-modules)
+collect_ignore = ["furnace/o6_peers"]
+
 # Property tests (hypothesis): deterministic (derandomize: CI sees the same examples every run, no
 # example database), a bounded number of examples, and a per-example deadline generous enough for a
 # loaded 2-core machine (the slowest examples take ~0.2 s on a machine at load 20; 10 s only catches

@@ -8,9 +8,10 @@ controller commanded -- never the furnace's injected faults.  Per sample:
    *dropout*: the TC gave no usable reading for ``dropout_s`` while another of TC1..3 did; *stuck*:
    it repeated the same value (to ``flat_tolerance`` K) for ``flat_s`` while real readings carry noise
    and follow the plate.  It returns TC1..3 for the EKF with the TCs found faulty left out (NaN).
-   When none of TC1..3 reads, no TC is found to have dropped out: the furnace or the link to it is out
-   (an outage, which the loop reports), and a TC left out for it would not be used again when the
-   readings return (they are re-admitted only once they agree with an estimate that ran blind).
+   While none of TC1..3 reads, no TC's dropout is counted: the furnace or the link to it is out (an
+   outage, which the loop reports), and a TC left out for it would not be used again when the readings
+   return (they are re-admitted only once they agree with an estimate that ran blind); a TC that still
+   gives nothing ``dropout_s`` after the others came back has dropped out.
 2. :meth:`FaultDetector.update` (after the update) runs the innovation tests: finite-memory GLR
    tests (:mod:`twin.estimation.glr`) of an offset or a drift on each of TC1..3 and of a lost
    fraction of each lamp group's power ("power that the model cannot explain"), on the readings of
@@ -156,15 +157,15 @@ class FaultDetector:
         usable = np.isfinite(y)
         same = usable & np.isfinite(self._last) & (np.abs(y - self._last) <= s.flat_tolerance)
         self._flat = np.where(same, self._flat + 1, 0)
-        self._unusable = np.where(usable, 0, self._unusable + 1)
+        isolating = bool(usable[:N_EKF_TCS].any())  # a dropout is one TC's only while another reads
+        self._unusable = np.where(usable, 0, self._unusable + int(isolating))  # an outage counts for none
         self._last = y
         self._y = y
         if self._reported[3] and usable[3] and self._flat[3] == 0:
             self._reported[3] = ""  # TC4 (never left out: it only validates) reads again
-        isolating = bool(usable[:N_EKF_TCS].any())  # a dropout is one TC's only while another reads
         for i, name in enumerate(TC_NAMES):
             kind, since = "", 0
-            if self._unusable[i] >= self._n(s.dropout_s) and isolating:
+            if self._unusable[i] >= self._n(s.dropout_s):
                 kind, since = "dropout", self._unusable[i] - 1  # samples since the first one without a reading
             elif self._flat[i] + 1 >= self._n(s.flat_s):
                 kind, since = "stuck", self._flat[i]

@@ -243,13 +243,17 @@ class FurnaceLink:
 
     async def write(self, values: Mapping[str, Any]) -> None:
         """One Write request for all ``values`` (twin units); a lost transport starts the reconnection."""
+        from asyncua import ua
+
         client = self._client
         if self.state != "connected" or client is None:
             raise ConnectionError(f"the link to the furnace is {self.state}")
         names = list(values)
         try:
+            # values without timestamps: asyncua stamps a bare value with the client's clock, which a server may
+            # refuse (open62541: BadWriteNotSupported) and which is not the twin's to say for a setpoint
             await client.write_values([self.nodes[n].node for n in names],
-                                      [self._variant(n, values[n]) for n in names])
+                                      [ua.DataValue(self._variant(n, values[n])) for n in names])
         except (ConnectionError, OSError, TimeoutError) as exc:
             await self._lost(exc)
             raise
