@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import datetime
+import json
 import math
 import time
 
@@ -71,6 +72,9 @@ def test_the_newest_run_is_served_read_only_with_the_samples_time(tmp_path, smal
     stamp = live["T_mean_hat"].SourceTimestamp.replace(tzinfo=datetime.UTC)
     assert before <= stamp <= datetime.datetime.now(datetime.UTC)  # the sample's time, not the server's
     assert done["Status"].Value.Value == "finished" and done["RunId"].Value.Value == run_id
+    frame = json.loads(app.state.manager.last_frame(run_id))  # the last sample, as the stream sent it
+    stamped = done["T_mean_hat"].SourceTimestamp.replace(tzinfo=datetime.UTC).timestamp()
+    assert stamped == pytest.approx(frame["wall_time"], abs=1e-5)  # when the twin computed it
     last = body["latest"]
     assert done["T"].Value.Value == pytest.approx(last["t"])
     assert done["T_mean_hat"].Value.Value == pytest.approx(last["T_mean_hat"])

@@ -190,6 +190,42 @@ def test_a_late_sample_is_missing_and_the_next_one_counts(emulated, tmp_path) ->
         twin.close()
 
 
+class Clocked(Faulty):
+    """A furnace whose every reading is its own time (1000 K + t): a reading filed under another sample shows."""
+
+    def read(self, t: float) -> Readings:
+        r = self.inner.read(t)
+        return Readings(np.full(4, 1000.0 + t), r.timestamps, r.status)
+
+
+def test_a_tick_that_runs_late_is_filed_under_its_own_sample(tmp_path) -> None:
+    """The emulator's event loop held up just before some ticks (a loaded machine), so that they run late: each
+    sample is stamped with its own time and filed under it (stamped with the time the tick ran, a sample more
+    than half a period late went under the next one).  A tick later than a whole period skips a sample (the
+    furnace lost it): missing, never misfiled."""
+    port = free_port()
+    with InProcessEmulator(make_emulator(Clocked(SimulatedFurnace(CFG, radiation=None, tc_noise=0.0)), port)) as emu:
+        twin = connect(port, tmp_path, late_fraction=3.0)  # samples may come 0.3 s late
+        t = CFG.sampling.t_s
+        got = []
+        try:
+            twin.read(0.0)
+            origin = None
+            for j in range(1, 31):
+                twin.apply(np.zeros(6), (j - 1) * t)
+                r = twin.read(j * t)
+                if r.status[0] == "good":
+                    origin = r.values[0] - 1000.0 - j * t if origin is None else origin
+                    got.append((j, round(r.values[0] - 1000.0 - origin - j * t, 6)))
+                if j % 3 == 0:  # 40 ms after sample j came, hold the emulator's loop 120 ms: tick j + 1 runs late
+                    time.sleep(0.04)
+                    emu.loop.call_soon_threadsafe(time.sleep, 0.12)
+        finally:
+            twin.close()
+    assert len(got) >= 20, got
+    assert [j for j, off in got if off != 0.0] == [], got  # each reading is of its own sample
+
+
 def test_reconnection_within_the_window_and_loss_after_it(emulated, tmp_path) -> None:
     """A network blip (the relay drops the connection and turns the twin away for 1 s) is bridged; a link
     that stays down for longer than reconnect_s is lost for good (FurnaceLost from read)."""
@@ -199,9 +235,15 @@ def test_reconnection_within_the_window_and_loss_after_it(emulated, tmp_path) ->
                         cert_dir=tmp_path / "twin-opcua")
     try:
         twin.read(0.0)
+        u = np.full(6, 0.7)
+        twin.apply(u, 0.0)
+        assert twin.delivered(u, 0.0).tolist() == u.tolist()
         proxy.refuse = True
         proxy.cut()
-        time.sleep(1.0)
+        time.sleep(0.3)
+        assert twin.delivered(u, 0.0).tolist() == u.tolist()  # the furnace holds the last command ...
+        time.sleep(0.9)
+        assert twin.delivered(u, 0.0).tolist() == [0.0] * 6  # ... until its watchdog has had a second
         proxy.refuse = False
         end = time.monotonic() + 10
         while twin._link.state != "connected" and time.monotonic() < end:
