@@ -270,3 +270,26 @@ def wait_status(c: Any, run_id: str, statuses: set[str], timeout: float) -> dict
             return body
         time.sleep(0.1)
     raise AssertionError(f"run {run_id} never reached {statuses}: {body.get('status')} {body.get('error')}")
+
+
+def run_over_opcua(tmp_path: Path, cfg: Any, scenario: dict[str, Any], *emulate_args: str,
+                   timeout: float = 180.0) -> tuple[dict[str, Any], Any, dict[str, Any]]:
+    """``scenario`` run through the dashboard's API against ``furnace-twin emulate`` (its furnace: the same
+    scenario's, with ``emulate_args``), to its end: (metrics, timeseries.npz, the emulator's stats)."""
+    import io
+    import json
+
+    import numpy as np
+
+    (tmp_path / "plant.json").write_text(json.dumps(scenario))
+    with emulator_process(tmp_path, "--scenario", str(tmp_path / "plant.json"), *emulate_args) as emu, \
+            twin_app(tmp_path, cfg) as c:
+        r = c.post("/api/runs", json={**scenario, "plant": {"kind": "opcua", "endpoint": emu.url}})
+        assert r.status_code == 201, r.text
+        run_id = r.json()["id"]
+        body = wait_status(c, run_id, {"finished", "error", "plant_lost"}, timeout=timeout)
+        assert body["status"] == "finished", body["error"]
+        metrics = c.get(f"/api/runs/{run_id}/metrics").json()
+        npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
+    return metrics, npz, json.loads(emu.stats.read_text())
+

@@ -12,12 +12,9 @@ machine only makes the run slower.  (The real-time path has its own test with it
 
 from __future__ import annotations
 
-import io
-import json
-
 import numpy as np
 import pytest
-from opcua_helpers import emulator_process, twin_app, wait_status
+from opcua_helpers import run_over_opcua
 
 from twin.config import small_config
 from twin.runs.loop import ClosedLoop
@@ -49,17 +46,7 @@ def test_lock_step_run_over_opcua_equals_the_in_process_run(tmp_path, small_radi
     list(in_process.run())
     reference, ref = in_process.metrics(), in_process.timeseries()
 
-    (tmp_path / "plant.json").write_text(json.dumps(LOCKSTEP))
-    with emulator_process(tmp_path, "--scenario", str(tmp_path / "plant.json"), "--lock-step") as emu, \
-            twin_app(tmp_path, CFG) as c:
-        r = c.post("/api/runs", json={**LOCKSTEP, "plant": {"kind": "opcua", "endpoint": emu.url}})
-        assert r.status_code == 201, r.text
-        run_id = r.json()["id"]
-        body = wait_status(c, run_id, {"finished", "error", "plant_lost"}, timeout=240)
-        assert body["status"] == "finished", body["error"]
-        metrics = c.get(f"/api/runs/{run_id}/metrics").json()
-        npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
-    stats = json.loads(emu.stats.read_text())
+    metrics, npz, stats = run_over_opcua(tmp_path, CFG, LOCKSTEP, "--lock-step", timeout=240)
 
     setpoint = LOCKSTEP["reference"]["setpoint"]
     print(f"steady mean error over OPC UA (lock step) {100 * metrics['mean_error_steady_max']:.4f} %, in process "

@@ -33,7 +33,7 @@ import time
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
-from opcua_helpers import Peek, child_env, emulator_process, small_config_file, twin_app, wait_status
+from opcua_helpers import Peek, child_env, emulator_process, run_over_opcua, small_config_file, twin_app, wait_status
 
 from twin.config import small_config
 from twin.runs.loop import ClosedLoop
@@ -88,17 +88,7 @@ def test_closed_loop_over_opcua_runs_the_in_process_loop_until_timing_disturbs_i
     reference, ref = in_process.metrics(), in_process.timeseries()
 
     # the emulated furnace: same seed and TC noise, its specimen at 300 K until the twin starts (as in process)
-    (tmp_path / "plant.json").write_text(json.dumps(BASE))
-    with emulator_process(tmp_path, "--scenario", str(tmp_path / "plant.json"), "--load-on-first-client") as emu, \
-            app(tmp_path) as c:
-        r = c.post("/api/runs", json={**BASE, "plant": {"kind": "opcua", "endpoint": emu.url}})
-        assert r.status_code == 201, r.text
-        run_id = r.json()["id"]
-        body = wait_status(c, run_id, {"finished", "error", "plant_lost"}, timeout=180)
-        assert body["status"] == "finished", body["error"]
-        metrics = c.get(f"/api/runs/{run_id}/metrics").json()
-        npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
-    stats = json.loads(emu.stats.read_text())
+    metrics, npz, stats = run_over_opcua(tmp_path, CFG, BASE, "--load-on-first-client")
     events = [str(e) for e in npz["event_text"]]
 
     j0, why = first_disturbance(npz, stats["applied"])
