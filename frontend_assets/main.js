@@ -26,20 +26,43 @@ export function showView(name) {
   window.dispatchEvent(new Event("resize")); // charts that were hidden take their size
 }
 
-// "server ok · 1 running", and while the radiation model warms up its progress (runs wait as queued)
+// "server ok · 1 running", and while the radiation model warms up its progress (runs wait as queued); when it
+// failed, why, with a Retry button
+const seconds = (s) => (s >= 90 ? `${Math.round(s / 60)} min` : `${Math.round(s)} s`);
+
 function serverState(h) {
   let text = `server ok · ${h.active_runs} running`;
   const p = h.radiation_progress;
   if (h.radiation === "computing") {
-    const done = p && p.total ? ` ${p.done}/${p.total} positions (${Math.round(100 * p.fraction)} %)` : "";
-    text += ` · radiation model: ${p ? p.stage : "computing"}${done}; new runs wait`;
+    const done = p && p.total ? ` ${p.done}/${p.total} positions` : "";
+    const left = p && p.remaining_s != null ? `, about ${seconds(p.remaining_s)} left` : "";
+    const since = p ? ` (${seconds(p.elapsed_s)} so far${left})` : "";
+    text += ` · radiation model: ${p ? p.stage : "computing"}${done}${since}; new runs wait`;
   } else if (h.radiation === "failed") {
     text += ` · radiation model failed: ${p && p.error ? p.error : "see the server log"}`;
   }
   return text;
 }
 
-const serverLine = () => { $("server-state").textContent = serverState(state.health); };
+const serverLine = () => {
+  const el = $("server-state");
+  el.textContent = serverState(state.health);
+  el.classList.toggle("error", state.health.radiation === "failed");
+  $("radiation-retry").hidden = state.health.radiation !== "failed";
+};
+
+async function retryRadiation() {
+  $("radiation-retry").disabled = true;
+  try {
+    await api("POST", "/api/radiation/retry");
+    state.health = await api("GET", "/api/health");
+    serverLine();
+  } catch (e) {
+    $("server-state").textContent = `retry refused: ${e.message}`;
+  } finally {
+    $("radiation-retry").disabled = false;
+  }
+}
 
 async function init() {
   forgetOldToken();
@@ -54,6 +77,7 @@ async function init() {
     return;
   }
   wireHelp();
+  $("radiation-retry").addEventListener("click", retryRadiation);
   initEstimatorCharts();
   wireForms();
   initStudies();
@@ -74,7 +98,7 @@ async function init() {
   setInterval(async () => {
     refreshRun();
     try { state.health = await api("GET", "/api/health"); serverLine(); } catch (e) { $("server-state").textContent = "server unreachable"; }
-  }, 2000);
+  }, state.health.radiation === "ready" ? 2000 : 1000); // progress from the first second of a cold start
 }
 
 init();

@@ -14,7 +14,10 @@ class RadiationProgress(BaseModel):
     total: int = Field(description="table positions (0 until known)")
     fraction: float = Field(ge=0.0, le=1.0)
     elapsed_s: float
-    error: str | None = None
+    remaining_s: float | None = Field(None, description="seconds left in the current ray trace at its pace so far "
+                                                        "(null before its first position)")
+    error: str | None = Field(None, description="why it failed (a worker's error, exit or stall); "
+                                                "POST /api/radiation/retry starts it again")
 
 
 class Health(BaseModel):

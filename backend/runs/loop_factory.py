@@ -39,6 +39,7 @@ class WarmUpStatus:
     started: float = 0.0  # time.monotonic() at the start
     finished: float | None = None
     error: str | None = None
+    stage_started: float = 0.0  # time.monotonic() when the current stage (table) began
 
     @property
     def fraction(self) -> float:
@@ -49,6 +50,15 @@ class WarmUpStatus:
     @property
     def elapsed_s(self) -> float:
         return (self.finished if self.finished is not None else time.monotonic()) - self.started
+
+    @property
+    def remaining_s(self) -> float | None:
+        """Seconds left in the current ray trace at the pace of its positions so far; ``None`` before the
+        first position (or when not tracing)."""
+        if self.state != "computing" or not self.done or not self.total or self.done >= self.total:
+            return None
+        pace = (time.monotonic() - self.stage_started) / self.done
+        return pace * (self.total - self.done)
 
 
 #: CPU priority of a run at speed max (os.nice): the server and the runs paced in real time come first
@@ -89,7 +99,9 @@ class DefaultLoopFactory:
         with self._status_lock:
             if key in self._status:
                 return
-            self._status[key] = WarmUpStatus("computing", "waiting", started=time.monotonic())
+            now = time.monotonic()
+            self._status[key] = WarmUpStatus("computing", "waiting", started=now, stage_started=now)
+        self._event(key).clear()  # a retry: wait again
         threading.Thread(target=self._warm_up, args=(cfg,), name="radiation-warm-up", daemon=True).start()
 
     def _warm_up(self, cfg: FurnaceConfig) -> None:
@@ -103,10 +115,24 @@ class DefaultLoopFactory:
             log.info("radiation model ready (%.1f s)", self._status[key].elapsed_s)
         except Exception as exc:
             log.exception("loading the radiation model failed; runs will retry")
-            self._set(key, state="failed", stage="failed", error=f"{type(exc).__name__}: {exc}",
-                      finished=time.monotonic())
+            from twin.radiation.workers import TraceFailed
+
+            reason = str(exc) if isinstance(exc, TraceFailed) else f"{type(exc).__name__}: {exc}"
+            self._set(key, state="failed", stage="failed", error=reason, finished=time.monotonic())
         finally:
             self._event(key).set()
+
+    def retry_warm_up(self, cfg: FurnaceConfig) -> bool:
+        """Start the warm-up of ``cfg`` again after it failed; False (nothing done) unless it failed."""
+        key = cfg.digest()
+        with self._status_lock:
+            st = self._status.get(key)
+            if st is None or st.state != "failed":
+                return False
+            del self._status[key]
+        log.info("retrying the radiation model")
+        self.start_warm_up(cfg)
+        return True
 
     def warm_up_status(self, cfg: FurnaceConfig) -> WarmUpStatus:
         """The radiation model's state: ``ready`` once loaded (also when it was loaded without a warm-up)."""
@@ -146,11 +172,12 @@ class DefaultLoopFactory:
         try:
             if key not in store:
                 if key in self._status:
-                    self._set(key, stage=f"loading the cache{what}", done=0, total=0)
+                    self._set(key, stage=f"loading the cache{what}", done=0, total=0, stage_started=time.monotonic())
 
                 def traced(done: int, total: int) -> None:
                     if key in self._status:
-                        self._set(key, stage=f"ray tracing{what}", done=done, total=total)
+                        more = {"stage_started": time.monotonic()} if done == 0 else {}
+                        self._set(key, stage=f"ray tracing{what}", done=done, total=total, **more)
 
                 store[key] = load(cfg, on_position=traced)
             return store[key]

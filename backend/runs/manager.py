@@ -104,6 +104,11 @@ class RunManager(RunDriver):
         status = getattr(self.loop_factory, "warm_up_status", None)
         return status(self.cfg) if callable(status) else None
 
+    def retry_warm_up(self) -> bool:
+        """Start the radiation model's warm-up again after it failed; False if it has not failed."""
+        retry = getattr(self.loop_factory, "retry_warm_up", None)
+        return bool(retry(self.cfg)) if callable(retry) else False
+
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id (:meth:`launch` without a request id)."""
         return (await self.launch(scenario)).run_id

@@ -94,3 +94,67 @@ def test_a_run_stopped_while_queued_ends_stopped(tmp_path, small_cfg, gated_radi
         body = wait_status(c, run_id, {"stopped", "error", "finished"}, timeout=30)
         assert body["status"] == "stopped", body
         assert _health(c)["radiation"] == "computing"
+
+
+def test_a_stalled_trace_is_reported_with_its_reason_and_can_be_retried(monkeypatch, tmp_path, small_cfg,
+                                                                       small_radiation) -> None:
+    """The page says what failed (the watchdog's reason), and POST /api/radiation/retry starts the warm-up again."""
+    from twin.radiation.workers import TraceStalled
+
+    calls = []
+    gate = threading.Event()
+
+    def flaky_model(cfg, *, cache_dir=None, progress=False, symmetric=False, on_position=None):
+        if symmetric:  # the simulated furnace's own table (also asked by an earlier test's warm-up thread)
+            return small_radiation
+        calls.append(1)
+        if on_position is not None:
+            on_position(0, 13)
+        if len(calls) == 1:
+            raise TraceStalled("ray tracing stalled: worker 123 used no CPU time for 60 s on position 2 of 13")
+        if on_position is not None:
+            on_position(4, 13)
+        assert gate.wait(120), "the test never opened the gate"
+        return small_radiation
+
+    monkeypatch.setattr("twin.radiation.radiation_model", flaky_model)
+    app = create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())
+    try:
+        with TestClient(app, base_url="http://127.0.0.1") as c:
+            end = time.monotonic() + 30
+            while _health(c)["radiation"] == "computing" and time.monotonic() < end:
+                time.sleep(0.02)
+            h = _health(c)
+            assert h["radiation"] == "failed"
+            assert h["radiation_progress"]["error"].startswith("ray tracing stalled: worker 123 used no CPU"), h
+            before = len(calls)
+            r = c.post("/api/radiation/retry")
+            assert r.status_code == 202, r.text
+            end = time.monotonic() + 30
+            while _health(c)["radiation_progress"]["done"] < 4 and time.monotonic() < end:
+                time.sleep(0.02)
+            h = _health(c)
+            assert len(calls) == before + 1
+            assert h["radiation"] == "computing" and h["radiation_progress"]["error"] is None
+            assert h["radiation_progress"]["remaining_s"] is not None and h["radiation_progress"]["remaining_s"] >= 0
+            again = c.post("/api/radiation/retry")
+            assert again.status_code == 409 and "computing" in again.text, again.text
+            gate.set()
+            end = time.monotonic() + 60
+            while _health(c)["radiation"] != "ready" and time.monotonic() < end:
+                time.sleep(0.05)
+            assert _health(c)["radiation"] == "ready"
+            assert c.post("/api/radiation/retry").status_code == 409
+    finally:
+        gate.set()
+
+
+def test_remaining_seconds_follow_the_pace_of_the_positions() -> None:
+    from backend.runs.loop_factory import WarmUpStatus
+
+    now = time.monotonic()
+    # 4 of 13 positions in 20 s: 5 s each, 9 left -> 45 s
+    st = WarmUpStatus("computing", "ray tracing", done=4, total=13, started=now - 30, stage_started=now - 20)
+    assert st.remaining_s == pytest.approx(45.0, abs=0.5)
+    assert WarmUpStatus("computing", "ray tracing", done=0, total=13, stage_started=now).remaining_s is None
+    assert WarmUpStatus("ready", "ready", done=13, total=13).remaining_s is None

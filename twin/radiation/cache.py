@@ -103,6 +103,8 @@ def compute_table(cfg: FurnaceConfig, *, progress: bool = False, workers: int | 
 
         bar = tqdm(total=n, desc="exchange factors", unit="position")
     done = 0
+    if on_position is not None:
+        on_position(0, n)  # the total is known from the first second
 
     def one_more() -> None:
         nonlocal done

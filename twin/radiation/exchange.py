@@ -4,16 +4,15 @@
 Each position is ray-traced (:mod:`twin.radiation.raytrace`) with its own child seed of
 ``radiation.seed`` (so the table does not depend on the number of workers), then made
 reciprocal and closed (:mod:`twin.radiation.reciprocity`).  Positions run in up to two
-worker processes, because Embree through embreex traces on one core per call.
+worker processes, because Embree through embreex traces on one core per call; the workers are fresh
+interpreters watched for stalls (:mod:`twin.radiation.workers`).
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import os
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -23,6 +22,7 @@ from twin.config import FurnaceConfig
 from twin.physics.geometry import FurnaceGeometry, furnace_geometry
 from twin.radiation.raytrace import TraceStats, trace_exchange_factors
 from twin.radiation.reciprocity import FixUp, enforce_reciprocity_closure
+from twin.radiation.workers import STALL_S, run_jobs
 
 log = logging.getLogger(__name__)
 Array = NDArray[np.float64]
@@ -98,40 +98,24 @@ def _worker(args: tuple[FurnaceConfig, float, np.random.SeedSequence]) -> tuple[
     return _trace_position(*args)
 
 
-def _die_with_parent(parent: int) -> None:
-    """Pool initializer: a worker dies with the process that asked for the table.
-
-    A forked worker inherits the cache's lock file (twin/radiation/cache.py), so a worker that
-    outlived a killed server kept every other process from computing or reading that table
-    until its own job ended (seen: 15 minutes on a loaded machine).  Linux's PR_SET_PDEATHSIG
-    sends it SIGKILL when the parent goes; a parent already gone before that ends it at once.
-    """
-    try:
-        import ctypes
-        import signal
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):  # not Linux: the parent's normal exit still shuts the pool down
-        pass
-    if os.getppid() != parent:
-        os._exit(1)
-
-
 def run_positions(
     worker: Callable[[Any], tuple[Array, str, bool]],
     jobs: list[Any],
     *,
     workers: int | None = None,
     on_position: Callable[[], None] | None = None,
+    stall_s: float = STALL_S,
 ) -> list[Array]:
     """``worker(job)`` for every job (one eta position each), in up to :data:`MAX_WORKERS` processes.
 
-    ``worker`` returns (F, log message, escaped); results come back in the order of ``jobs``.
+    ``worker`` returns (F, log message, escaped); results come back in the order of ``jobs``.  The
+    processes are fresh interpreters (:mod:`twin.radiation.workers`), never forks of this process, which
+    may be a multithreaded server; a worker that fails, dies or stalls for ``stall_s`` s raises
+    :class:`twin.radiation.workers.TraceFailed` with the reason.
     """
     n_workers = workers if workers is not None else min(MAX_WORKERS, len(jobs), os.cpu_count() or 1)
-    out: list[Array] = []
     if n_workers <= 1:
+        out: list[Array] = []
         for job in jobs:
             F, msg, escaped = worker(job)
             _report(msg, escaped)
@@ -139,19 +123,17 @@ def run_positions(
             if on_position:
                 on_position()
         return out
-    # fork: the children must not re-import ``__main__`` (spawn would, and a script that
-    # builds the radiation model at import would then wait on its own cache lock);
-    # they only run numpy/Embree and never log.
-    ctx = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(
-        max_workers=n_workers, mp_context=ctx, initializer=_die_with_parent, initargs=(os.getpid(),)
-    ) as pool:
-        for F, msg, escaped in pool.map(worker, jobs):
-            _report(msg, escaped)
-            out.append(F)
-            if on_position:
-                on_position()
-    return out
+
+    def arrived(_: int, result: tuple[Array, str, bool]) -> None:
+        _report(result[1], result[2])
+        if on_position:
+            on_position()
+
+    def describe(i: int) -> str:
+        return f"position {i + 1} of {len(jobs)} (eta = {jobs[i][1]:+.4f} m)"
+
+    done = run_jobs(worker, jobs, workers=n_workers, on_result=arrived, stall_s=stall_s, describe=describe)
+    return [F for F, _, _ in done]
 
 
 def exchange_factor_table(
