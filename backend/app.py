@@ -23,7 +23,19 @@ from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
-from backend.api.routes import dashboard, docs, exports, files, furnace, glossary, health, runs, stream, studies
+from backend.api.routes import (
+    dashboard,
+    docs,
+    exports,
+    files,
+    furnace,
+    glossary,
+    health,
+    rerun_page,
+    runs,
+    stream,
+    studies,
+)
 from backend.core.errors import validation_error
 from backend.core.security import SecurityMiddleware
 from backend.core.settings import Settings
@@ -161,7 +173,7 @@ def create_app(
         redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, glossary, runs, files, exports, stream, studies, dashboard, docs):
+    for module in (health, furnace, glossary, runs, files, exports, stream, studies, rerun_page, dashboard, docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)

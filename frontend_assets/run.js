@@ -28,7 +28,7 @@ function fileLinks(run) {
       `<a href="${base}/report.png" download>report PNG</a>`);
   }
   if (f.timeseries) links.push(`<a href="${base}/timeseries" download>npz</a>`);
-  if (f.recording) links.push(`<a href="${base}/recording" download title="rerun recording: rerun FILE">rrd</a>`);
+  if (f.recording) links.push(`<a href="${base}/recording.rrd" download title="rerun recording: rerun FILE">rrd</a>`);
   if (state.health && state.health.viser_url) links.push(`<a href="${state.health.viser_url}" target="_blank" rel="noopener">3D view</a>`);
   if (run.links && run.links.rerun) {
     const what = going(run) ? "the live stream in the rerun web viewer" : "the recording in the rerun web viewer";

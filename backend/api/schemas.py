@@ -28,8 +28,8 @@ class Health(BaseModel):
     active_runs: int
     max_concurrent_runs: int
     viser_url: str | None = Field(None, description="the 3D view, when it runs")
-    rerun_url: str | None = Field(None, description="the rerun web viewer, when it runs (a run's recording: "
-                                                    "its links.rerun)")
+    rerun_url: str | None = Field(None, description="the rerun web viewer served by this server (/rerun/), when it "
+                                                    "runs (a run's recording: its links.rerun)")
     auth_required: bool = Field(description="mutating endpoints need the API token")
     disk: dict[str, Any] = Field(default_factory=dict,
                                  description="data directory: used_mb, free_mb (its disk), quota_mb, min_free_mb, "

@@ -98,9 +98,10 @@ class RerunWebViewer:
         """Its gRPC proxy: where runs stream when no ``--rerun-connect`` is given."""
         return grpc_url(self.grpc_port)
 
-    def link(self, data_url: str) -> str:
-        """The viewer opened on ``data_url`` (an ``.rrd`` over HTTP, or a ``rerun+http://`` proxy)."""
-        return f"{self.url}?url={urllib.parse.quote(data_url, safe='')}"
+    def link(self, data_url: str, page: str | None = None) -> str:
+        """The viewer opened on ``data_url`` (an ``.rrd`` over HTTP, or a ``rerun+http://`` proxy); ``page`` is where
+        the viewer is served (default: its own port; the server serves it offline at ``/rerun/``)."""
+        return f"{page or self.url}?url={urllib.parse.quote(data_url, safe='')}"
 
     def start(self, timeout_s: float = 20.0) -> bool:
         """Start the child; True once its page answers (False, with a warning, if it cannot start)."""

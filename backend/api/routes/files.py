@@ -28,6 +28,14 @@ def _file(run_id: str, manager: ManagerDep, which: str) -> Path:
     return path
 
 
+@router.get("/{run_id}/recording.rrd", response_class=FileResponse,
+            responses={200: {"content": {"application/octet-stream": {}}},
+                       404: {"description": "no such run or no recording"}})
+def recording_rrd(run_id: str, manager: ManagerDep, request: Request) -> FileResponse:
+    """The same recording under a name ending ``.rrd``: what the rerun viewer needs to open it (``links.rerun``)."""
+    return recording(run_id, manager, request)
+
+
 @router.get("/{run_id}/recording", response_class=FileResponse,
             responses={200: {"content": {"application/octet-stream": {}}},
                        404: {"description": "no such run or no recording"}})

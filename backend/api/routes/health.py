@@ -46,7 +46,9 @@ def health(manager: ManagerDep, settings: SettingsDep, request: Request) -> Heal
         active_runs=len(manager.live_runs()),
         max_concurrent_runs=settings.max_concurrent_runs,
         viser_url=getattr(request.app.state, "viser_url", None),
-        rerun_url=getattr(request.app.state, "rerun_url", None),
+        # the viewer as this server serves it, offline (backend/api/routes/rerun_page.py)
+        rerun_url=f"{str(request.base_url).rstrip('/')}/rerun/" if getattr(request.app.state, "rerun_url", None)
+        else None,
         auth_required=bool(settings.api_token),
         reads_need_token=settings.reads_need_token,
         disk=manager.disk.report(),

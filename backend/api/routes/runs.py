@@ -32,13 +32,16 @@ def links(run_id: str, rerun: str | None = None) -> RunLinks:
 
 
 def rerun_link(request: Request | None, manager: RunManager, run_id: str, state: str) -> str | None:
-    """The server's rerun web viewer on a run: its live stream while it goes, else its recording file."""
+    """The rerun web viewer served by this server (``/rerun/``, offline) on a run: its live stream while it goes,
+    else its recording file (a URL ending ``.rrd``, which the viewer needs to open it)."""
     viewer = None if request is None else getattr(request.app.state, "rerun_viewer", None)
     if viewer is None or request is None:
         return None
+    base = str(request.base_url).rstrip("/")
+    page = f"{base}/rerun/"
     if (state in ACTIVE_STATUSES or manager.status(run_id) is not None) and manager.live_url:
-        return str(viewer.link(manager.live_url))
-    return str(viewer.link(f"{str(request.base_url).rstrip('/')}/api/runs/{run_id}/recording"))
+        return str(viewer.link(manager.live_url, page=page))
+    return str(viewer.link(f"{base}/api/runs/{run_id}/recording.rrd", page=page))
 
 
 def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
