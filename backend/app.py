@@ -23,6 +23,7 @@ from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
+from backend.api.links import add_links
 from backend.api.routes import (
     dashboard,
     docs,
@@ -36,6 +37,7 @@ from backend.api.routes import (
     stream,
     studies,
 )
+from backend.api.schema_limits import apply_limits
 from backend.core.errors import validation_error
 from backend.core.security import SecurityMiddleware
 from backend.core.settings import Settings
@@ -55,7 +57,7 @@ from backend.runs.worker import LoopFactory
 from backend.storage.recovery import recover_interrupted
 from backend.storage.repository import RunRepository
 from backend.studies.manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
-from twin.config import FurnaceConfig, load_config
+from twin.config import SHIPPED_FURNACES, FurnaceConfig, load_config
 from twin.limits import scenario_limits
 
 log = logging.getLogger(__name__)
@@ -179,4 +181,14 @@ def create_app(
         app.add_exception_handler(exc_type, _error)
     app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
     app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
+    openapi = app.openapi
+
+    def openapi_with_links() -> dict:
+        """FastAPI's schema with links from each POST to the resource it made, and this server's bounds."""
+        if app.openapi_schema is None:
+            served = limits.capped(settings.max_duration_s, settings.max_speed)
+            app.openapi_schema = apply_limits(add_links(openapi()), served, tuple(SHIPPED_FURNACES))
+        return app.openapi_schema
+
+    app.openapi = openapi_with_links  # type: ignore[method-assign]
     return app

@@ -102,6 +102,8 @@ MAX_FAULTS = 32  # entries of one fault list
 TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
 TC_FAULT_KINDS = ("stuck", "drift", "offset", "dropout")
 GROUP_FAULT_KINDS = ("failed", "derate")
+#: the size a fault kind takes (the others take none)
+FAULT_VALUE_RANGE = {"drift": FAULT_DRIFT, "offset": FAULT_OFFSET, "derate": FAULT_DERATE}
 
 #: the simulated furnace's truth (twin.scenario.Scenario.truth): its own, or the model's tables and ideal sensors
 TruthKind = Literal["independent", "shared"]

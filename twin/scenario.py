@@ -174,7 +174,6 @@ class Mismatch(_Model):
 
 
 FaultKind = Literal["stuck", "drift", "offset", "dropout", "failed", "derate"]
-_VALUE_RANGE = {"drift": lim.FAULT_DRIFT, "offset": lim.FAULT_OFFSET, "derate": lim.FAULT_DERATE}
 
 
 class FaultSpec(_Model):
@@ -203,7 +202,7 @@ class FaultSpec(_Model):
         if not on_tc and self.target not in groups:
             raise ValueError(f"target: a {self.kind} fault needs a lamp group of this furnace "
                              f"({', '.join(groups)}), got {self.target!r}")
-        r = _VALUE_RANGE.get(self.kind)
+        r = lim.FAULT_VALUE_RANGE.get(self.kind)
         if r is None and self.value is not None:
             raise ValueError(f"value: a {self.kind} fault takes no value")
         if r is not None:
@@ -245,7 +244,16 @@ class EstimatorSpec(EstimatorChoice):
 class SimulatedPlant(_Model):
     """The run's furnace is simulated in process (``SimulatedFurnace``): any speed."""
 
+    # a plant object names its kind (the discriminator refuses {}); only a left-out plant defaults to this one
+    model_config = ConfigDict(json_schema_extra={"required": ["kind"]})
+
     kind: Literal["simulated"] = "simulated"
+
+
+#: what ``twin.endpoints.parse_endpoint`` accepts, for the OpenAPI schema: opc.tcp:// (any case), a host, a port
+#: up to 65535
+ENDPOINT_PATTERN = (r"^\s*[Oo][Pp][Cc]\.[Tt][Cc][Pp]://[A-Za-z0-9._~-]+(:(6553[0-5]|655[0-2][0-9]|65[0-4][0-9]{2}|6[0-4][0-9]{3}|[1-5][0-9]{4}|[0-9]{1,4}))?"
+                    r"(/[^\s]*)?\s*$")
 
 
 class OpcUaPlant(_Model):
@@ -257,7 +265,8 @@ class OpcUaPlant(_Model):
 
     kind: Literal["opcua"]
     endpoint: str = Field("opc.tcp://127.0.0.1:4840/furnace-twin/", max_length=512,
-                          description="opc.tcp://host:port/path")
+                          description="opc.tcp://host:port/path",
+                          json_schema_extra={"pattern": ENDPOINT_PATTERN})
 
     @field_validator("endpoint")
     @classmethod
@@ -270,12 +279,27 @@ class OpcUaPlant(_Model):
 Plant = Annotated[SimulatedPlant | OpcUaPlant, Field(discriminator="kind")]
 
 
+def _tc4_schema(schema: dict[str, Any]) -> None:
+    """OpenAPI: both relative coordinates in [0, 1], as ``Scenario._tc4`` checks."""
+    for item in schema.get("prefixItems", []):
+        item.update(minimum=lim.TC4_RELATIVE.lo, maximum=lim.TC4_RELATIVE.hi)
+
+
+def _speed_schema(schema: dict[str, Any]) -> None:
+    """OpenAPI: a real-time factor in the range ``Scenario._speed`` checks."""
+    for option in schema.get("anyOf", []):
+        if option.get("type") == "number":
+            option.update(minimum=lim.SPEED.lo, maximum=MAX_SPEED)
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: Num = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
     oscillation: OscillationSpec = Field(default_factory=OscillationSpec)
-    tc4: tuple[Num, Num] = Field(_DEFAULT.tc4, description="relative (x / L_s, y / W_s)")
-    speed: Literal["max"] | Num = Field(lim.SPEED.default, description="'max' or a real-time factor")
+    tc4: tuple[Num, Num] = Field(_DEFAULT.tc4, description="relative (x / L_s, y / W_s)",
+                                 json_schema_extra=_tc4_schema)
+    speed: Literal["max"] | Num = Field(lim.SPEED.default, description="'max' or a real-time factor",
+                                        json_schema_extra=_speed_schema)
     mismatch: Mismatch = Field(default_factory=Mismatch)
     tc_noise: Num = Field(_DEFAULT.tc_noise.default, ge=0.0, le=lim.TC_NOISE_MAX_K,
                             description="TC noise standard deviation, K")

@@ -6,6 +6,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
+from backend.storage.repository import MAX_LABEL_CHARS
+
 
 class RadiationProgress(BaseModel):
     stage: str = Field(description="waiting, loading the cache, ray tracing, building the model, then loading or "
@@ -100,10 +102,16 @@ class RunSummary(BaseModel):
     links: RunLinks
 
 
+#: printable characters (``clean_label``), for the schema: whitespace (folded to one space), ASCII and Latin-1
+#: letters and signs; the server also takes other printable Unicode
+LABEL_PATTERN = r"^[\s!-~\u00a1-\u00ac\u00ae-\u00ff]*$"
+
+
 class LabelIn(BaseModel):
     """``PATCH /api/runs/{id}``: the run's name (null or empty: none)."""
 
-    label: str | None = Field(None, description="at most 80 characters")
+    label: str | None = Field(None, description="at most 80 characters",
+                              json_schema_extra={"maxLength": MAX_LABEL_CHARS, "pattern": LABEL_PATTERN})
 
 
 class RunDetail(RunSummary):

@@ -173,3 +173,13 @@ def test_every_shipped_study_expands_against_its_furnace(path):
     cases = expand(spec, load_config(spec.furnace))
     n_grid = int(np.prod([len(v) for v in spec.grid.values()])) if spec.grid else 1
     assert len(cases) == n_grid * (spec.monte_carlo.n if spec.monte_carlo else 1)
+
+
+def test_monte_carlo_fields_that_are_not_a_table_are_a_study_error_not_a_crash():
+    """schemathesis found ``"fields": [null, null]`` answered 500 (a TypeError in the block's field
+    collection); any non-table ``fields`` is now a StudyError naming it (a 422 from the API)."""
+    from twin.studies.spec import StudyError, parse_study
+
+    for fields in ([None, None], "x", 3):
+        with pytest.raises(StudyError, match="monte_carlo: fields: a table"):
+            parse_study({"monte_carlo": {"n": 1, "fields": fields}})

@@ -63,7 +63,11 @@ class MonteCarlo(BaseModel):
     def _collect_fields(cls, data: Any) -> Any:
         if not isinstance(data, dict):
             return data
-        fields = dict(data.get("fields") or {})
+        given = data.get("fields")
+        if given is not None and not isinstance(given, dict):
+            raise ValueError("fields: a table of scenario field path -> distribution, "
+                             f"got {type(given).__name__}")
+        fields = dict(given or {})
         fields.update({k: v for k, v in data.items() if k not in MC_KEYWORDS})
         return {**{k: v for k, v in data.items() if k in MC_KEYWORDS}, "fields": fields}
 
@@ -73,14 +77,23 @@ class MonteCarlo(BaseModel):
                 **{p: d.model_dump() for p, d in self.fields.items()}}
 
 
+#: OpenAPI: what ``StudySpec._consistent`` and ``_grid`` check of the structure: a non-empty grid and/or a
+#: Monte Carlo block, and every grid path with at least one value
+_STUDY_SCHEMA: dict[str, Any] = {
+    "anyOf": [{"required": ["grid"], "properties": {"grid": {"minProperties": 1}}},
+              {"required": ["monte_carlo"], "properties": {"monte_carlo": {"type": "object"}}}],
+}
+
+
 class StudySpec(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_STUDY_SCHEMA)
 
     name: str | None = Field(None, max_length=200, description="a title for tables and the dashboard")
     furnace: str | None = Field(None, min_length=1, max_length=500,
                                 description="shipped furnace name or TOML path; default: the running furnace")
     base: dict[str, Any] = Field(default_factory=dict, description="the base scenario; every field optional")
-    grid: dict[str, list[Any]] = Field(default_factory=dict, description="field path -> values (full factorial)")
+    grid: dict[str, list[Any]] = Field(default_factory=dict, description="field path -> values (full factorial)",
+                                       json_schema_extra={"additionalProperties": {"type": "array", "minItems": 1}})
     monte_carlo: MonteCarlo | None = None
 
     @field_validator("grid")

@@ -7,7 +7,7 @@ import csv
 import io
 import re
 from collections.abc import Iterator, Mapping
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, HTTPException, status
@@ -84,12 +84,9 @@ def export_csv(run_id: str, manager: ManagerDep) -> StreamingResponse:
 @router.get("/{run_id}/report.{fmt}", response_class=Response, responses={
     **NOT_FOUND, 200: {"content": {"application/pdf": {}, "image/png": {}}},
     422: {"description": "the format is neither pdf nor png"}})
-async def report(run_id: str, fmt: str, manager: ManagerDep) -> Response:
+async def report(run_id: str, fmt: Literal["pdf", "png"], manager: ManagerDep) -> Response:
     """A one-page report (``pdf`` or ``png``): scenario, charts with the metric windows, metrics in K and %,
     the last estimated field, the latest events (``twin.experiments.report``)."""
-    if fmt not in ("pdf", "png"):
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"report.{fmt}: the report is report.pdf or "
-                                                                      "report.png")
     z = _arrays(manager, run_id)
     row = manager.run(run_id)
 

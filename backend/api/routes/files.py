@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Annotated
 
@@ -43,7 +46,14 @@ def recording(run_id: str, manager: ManagerDep, request: Request) -> FileRespons
     """The rerun recording (``.rrd``); open it with ``rerun FILE``, or in the server's rerun web viewer
     (the run's ``links.rerun``: this file is readable from the viewer's origin)."""
     path = _file(run_id, manager, "recording")
-    response = FileResponse(path, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd")
+    # a copy: the recording may still grow (rerun appends while the run or its sink is going), and a file that
+    # grows while it is sent gives more bytes than its Content-Length (the client sees a broken response)
+    fd, name = tempfile.mkstemp(prefix=".recording-", suffix=".rrd", dir=path.parent)
+    with os.fdopen(fd, "wb") as out, path.open("rb") as src:
+        shutil.copyfileobj(src, out)
+    copy = Path(name)
+    response = FileResponse(copy, media_type="application/octet-stream", filename=f"{run_id}-recording.rrd",
+                            background=BackgroundTask(copy.unlink, missing_ok=True))
     origin = request.headers.get("origin")
     if origin is not None and origin in viewer_origins(request):
         response.headers["Access-Control-Allow-Origin"] = origin
