@@ -76,3 +76,18 @@ def test_stream_frame_and_opcua_carry_sigma_mean(run) -> None:
     assert sample_values(s)["FieldSigmaMean"] == pytest.approx(s.sigma_mean)  # no longer BadNoData
     assert frame_values(frame)["FieldSigmaMean"] == pytest.approx(s.sigma_mean)
 
+
+
+def test_dashboard_series_and_stored_snapshot_carry_the_uncertainty(run) -> None:
+    """GET /api/runs/{id}/series (the dashboard's history: band and sigma map) and the 3D view's stored sample."""
+    from backend.streaming.series import series_json
+    from twin.runs.record import last_snapshot
+
+    loop, _ = run
+    ts = loop.timeseries()
+    js = series_json(ts, max_points=10)
+    assert len(js["sigma_mean"]) == len(js["t"]) <= 11
+    np.testing.assert_allclose(np.asarray(js["field_sigma"]), ts["field_sigma"][-1], rtol=1e-6)
+    snap = last_snapshot(ts)
+    assert snap is not None and snap.field_sigma is not None
+    assert snap.sigma_mean == pytest.approx(float(ts["sigma_mean"][-1]))

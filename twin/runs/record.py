@@ -380,9 +380,12 @@ def last_snapshot(arrays: Mapping[str, Any]) -> StoredSnapshot | None:
     field = np.asarray(fh[-1], float) if fh is not None and len(fh) and fh.shape[1:] == shape else None
     ft = arrays.get("field_true")
     truth = np.asarray(ft[-1], float) if ft is not None and len(ft) and ft.shape[1:] == shape else None
+    fs = arrays.get("field_sigma")
+    sigma = np.asarray(fs[-1], float) if fs is not None and len(fs) and fs.shape[1:] == shape else None
     return StoredSnapshot(
         j=len(arrays["t"]) - 1, t=float(last("t")), eta=float(np.nan_to_num(last("eta"))), T_ref=float(last("T_ref")),
         T_mean_hat=T_mean, field_hat=field if field is not None else np.full(shape, T_mean), field_true=truth,
         tc=last("tc", 4), tc_hat=last("tc_hat", 4), u=last("u", 6), u_ff=last("u_ff", 6),
         inhomogeneity=float("nan"), true_mean=None, true_inhomogeneity=None, has_field=field is not None,
+        field_sigma=sigma, sigma_mean=float(last("sigma_mean")) if "sigma_mean" in arrays else None,
     )
