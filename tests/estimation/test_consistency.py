@@ -81,3 +81,32 @@ def test_coverage_and_cell_nees() -> None:
     assert np.isnan(coverage(np.array([np.nan]), np.ones(1)))
     z = cell_nees(err, np.zeros_like(err), np.full_like(err, 2.0), np.array([True, False]))
     np.testing.assert_allclose(z, [0.0, (2.5 / 2) ** 2])
+
+
+def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
+    """[ekf.model_error] changes what the twin reports, never its estimate: the joint filter with and without it
+    (small furnace, calibrating, position-aware, 30 samples of a heat-up with a reading 2 K off) gives identical
+    theta and filter P, while the reported covariance differs from the filter's."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice
+
+    cfg = small_config()
+    assert cfg.ekf.model_error is not None
+    plain = cfg.with_overrides({"ekf.model_error": None})
+    tables = model_tables(cfg, radiation_model(cfg))
+    a = build_estimator(EstimatorChoice(), tables, None, cfg, 300.0)
+    b = build_estimator(EstimatorChoice(), tables, None, plain, 300.0)
+    assert a.reported is not None and b.reported is None
+    u = np.full(6, 0.6)
+    for j in range(30):
+        y = np.array([300.0 + 2.0 * j, 302.0 + 2.0 * j, 300.0 + 2.0 * j])
+        for est in (a, b):
+            est.update(y, learn=j > 10)
+            est.predict(u, 0.0)
+    np.testing.assert_array_equal(a.state.theta, b.state.theta)
+    np.testing.assert_array_equal(a.state.P, b.state.P)
+    np.testing.assert_array_equal(b.reported_P, b.state.P)  # without model error the filter's P is reported
+    assert not np.allclose(a.reported_P, a.state.P)

@@ -12,6 +12,10 @@ sample j with a field at j + 1 as well:
 * q0, q1 of Q = q0 (q1 sign(M) + 1 1^T)^2 (the filter's form, section 3.2) fitted to D in the Frobenius norm
   (q0 in closed form for each q1 on a log grid).
 
+:func:`replay_metrics` re-runs a run's estimator on its stored readings, inputs and positions with another
+configuration's reported covariance (the estimate itself does not depend on it) and gives the run's metrics with
+that ``field_sigma``/``nis``: how a scale of q0 is tuned and checked without re-running the furnace.
+
 Example
 -------
 >>> import numpy as np
@@ -31,6 +35,7 @@ from numpy.typing import NDArray
 
 from twin.config import FurnaceConfig
 from twin.physics.fillet import Fillet
+from twin.scenario import Scenario
 
 Array = NDArray[np.float64]
 
@@ -91,3 +96,34 @@ def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], mo
     q0, q1 = fit_form(D, np.sign(np.asarray(fe.M, float)))
     return {"q0": q0, "q1": q1, "representation_rms": float(np.sqrt(np.mean(np.concatenate(rs) ** 2))),
             "samples": len(d_all), "defect_rms": float(np.sqrt(np.mean(d_all**2)))}
+
+
+def replay_metrics(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any) -> tuple[dict[str, Any], float]:
+    """(metrics, largest |replayed - stored estimate| in K over the stored fields) of a stored run whose estimator
+    is replayed with ``cfg`` (its ``[ekf.model_error]``); ``tables`` the twin's model tables of the furnace.
+    Follows the loop's order (update with TC1-3, learning while the reference holds, then predict with the applied
+    powers at eta); a run whose fault detection left a TC out or that changed its reference live is not replayed
+    exactly (the deviation says so)."""
+    from twin.estimation.choice import build_estimator
+    from twin.estimation.uncertainty import FieldUncertainty
+    from twin.runs.metrics import compute_metrics
+
+    sc = Scenario.model_validate_json(str(ts["scenario"]))
+    t, tc, u, eta = (np.asarray(ts[k], float) for k in ("t", "tc", "u", "eta"))
+    est = build_estimator(sc.estimator, tables, sc.oscillation, cfg, float(np.nanmean(tc[0, :3])))
+    me = cfg.ekf.model_error
+    unc = FieldUncertainty(est.model.fe, 0.0 if me is None else me.representation_rms)
+    tf = np.asarray(ts["t_field"], float)
+    shape = np.asarray(ts["field_hat"]).shape
+    sigma, hat, nis = np.zeros(shape), np.zeros(shape), np.zeros(len(t))
+    t_E, k = float(ts["t_E"]), 0
+    for j in range(len(t)):
+        est.update(tc[j, :3], learn=bool(t[j] >= t_E - 1e-9))
+        nis[j] = est.nis
+        if k < len(tf) and abs(tf[k] - t[j]) < 1e-6:
+            sigma[k], hat[k] = unc.field_sigma(est.reported_P), est.model.fe.field_on_cells(est.state.theta)
+            k += 1
+        est.predict(u[j], float(eta[j]))
+    out = dict(ts)
+    out.update(field_sigma=sigma, nis=nis)
+    return compute_metrics(out), float(np.max(np.abs(hat - np.asarray(ts["field_hat"], float))))
