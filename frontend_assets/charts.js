@@ -6,6 +6,7 @@ import { heatmapFigure } from "./heatmap.js";
 import { GROUP_COLORS, LANE, LANE0, saturationShapes, windowShapes } from "./overlays.js";
 import { emptySeries, saturationSpans } from "./series.js";
 import { state } from "./state.js";
+import { meanBand } from "./uncertainty.js";
 
 const TC_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"];
 const RENDER_MS = 250; // charts redraw at most 4 times per second; frames arrive up to 20/s
@@ -44,6 +45,7 @@ function meanFigure(s) {
   const w = windowShapes(windows(), tMax(s));
   return {
     data: [
+      ...meanBand(s),
       { x: s.t, y: s.T_ref, name: "reference T_ref", line: { color: "#111", dash: "dash", width: 1.6 } },
       { x: s.t, y: s.T_mean_hat, name: "fillet mean (estimate)", line: { color: "#d62728", width: 1.8 } },
       { x: pts.x, y: pts.y, name: "reference points", mode: "markers", showlegend: pts.x.length > 0,

@@ -2,6 +2,7 @@
 // colour scale that follows the field (auto, in 10 K steps) or stays where the user fixed it.
 import { $, fmt } from "./page.js";
 import { state } from "./state.js";
+import { sigmaTrace, unc } from "./uncertainty.js";
 
 const TURBO = [[0, "#30123b"], [0.1, "#4145ab"], [0.2, "#4675ed"], [0.3, "#39a2fc"], [0.4, "#1bcfd4"],
   [0.5, "#24eca6"], [0.6, "#61fc6c"], [0.7, "#a4fc3b"], [0.8, "#d1e834"], [0.9, "#f3c63a"], [1, "#7a0403"]];
@@ -47,7 +48,10 @@ export function heatmapFigure() {
   const [zmin, zmax] = scaleOf(z);
   const tc = s && s.tc ? s.tc : [null, null, null, null];
   const f = state.lastFrame;
-  $("heat-sub").textContent = f ? `t = ${fmt(f.t)} s · mean ${fmt(f.T_mean_hat)} K · ref ${fmt(f.T_ref)} K` : "";
+  $("heat-sub").textContent = f ? `t = ${fmt(f.t)} s · mean ${fmt(f.T_mean_hat)} K · ref ${fmt(f.T_ref)} K`
+    + (f.sigma_mean !== undefined && f.sigma_mean !== null ? ` ± ${fmt(2 * f.sigma_mean)} K (2σ)` : "")
+    + (unc.show ? (s && s.fieldSigma ? " · showing σ" : " · no σ for this run") : "") : "";
+  const sigma = sigmaTrace(fu, s);
   // TC1-TC3 above their marks, TC4 (between TC1 and TC3) below: the labels do not cover each other
   const place = [{ yshift: 13 }, { yshift: 13 }, { yshift: 13 }, { yshift: -14 }];
   const annotations = tcx.map((x, i) => ({ ...LABEL, ...place[i], x, y: tcy[i],
@@ -55,7 +59,7 @@ export function heatmapFigure() {
   annotations.push({ ...LABEL, x: x0, y: y1, xanchor: "left", yanchor: "top", xshift: 3, yshift: -3, text: "fillet" });
   return {
     data: [
-      { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best", zmin, zmax, zauto: zmin === undefined,
+      sigma || { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best", zmin, zmax, zauto: zmin === undefined,
         colorbar: { title: { text: "T (K)", side: "right" }, thickness: 12, len: 0.95 },
         hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>%{z:.1f} K<extra></extra>" },
       { type: "scatter", mode: "markers", x: tcx, y: tcy, hoverinfo: "skip", showlegend: false,

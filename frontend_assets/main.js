@@ -15,6 +15,7 @@ import { refreshRuns, wireRunList } from "./runlist.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
 import { initStudies } from "./studies.js";
+import { wireUncertainty } from "./uncertainty.js";
 
 window.state = state; // the page's state, for the browser console and the browser tests
 
@@ -82,6 +83,7 @@ async function init() {
   wireForms();
   initStudies();
   wireHeatScale(() => { state.dirty = true; });
+  wireUncertainty(() => { state.dirty = true; });
   wireRunList((id) => { selectRun(id); showView("live"); }, refreshComparison);
   for (const el of document.querySelectorAll(".tab")) el.addEventListener("click", () => showView(el.dataset.view));
   if (state.health.auth_required) { $("token-box").hidden = false; $("token").value = token(); }

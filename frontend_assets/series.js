@@ -4,13 +4,15 @@
 // With a calibrating estimator (issue 11) `params`: {name: {v: [...], s: [...]}} (relative deviations and their
 // sigmas, per sample); with a shadow estimator `shadowTc4Err` (TC4 reading - shadow estimate, K, per sample) and
 // `shadowDelta` (the last shadow field - estimated field, K); both stay empty / null for other runs.
+// The estimate's uncertainty (issue 25): `sigma_mean` (K, of the fillet mean, per sample) and `fieldSigma` (the
+// last field's standard deviation, K); null where the run does not report them.
 
 const MAX_POINTS = 4000; // per trace; older samples are thinned beyond it
 
 export function emptySeries() {
   return { t: [], T_ref: [], T_mean_hat: [], tcErr: [[], [], [], []], tc: null, u: [[], [], [], [], [], []],
     u_ff: [[], [], [], [], [], []], sat: [], inh_t: [], inh: [], spread: [], eta: [], field: null,
-    params: {}, shadowTc4Err: [], shadowDelta: null };
+    params: {}, shadowTc4Err: [], shadowDelta: null, sigma_mean: [], fieldSigma: null };
 }
 
 const lastT = (s) => (s.t.length ? s.t[s.t.length - 1] : -Infinity);
@@ -34,7 +36,7 @@ function pushEstimators(s, f) {
 
 export function pushFrame(s, f) {
   if (f.t <= lastT(s)) { // a repeated sample (a run's last frame)
-    s.field = f.field; s.tc = f.tc;
+    s.field = f.field; s.tc = f.tc; s.fieldSigma = f.field_sigma || s.fieldSigma;
     if (f.shadow && f.shadow.field_delta) s.shadowDelta = f.shadow.field_delta;
     return;
   }
@@ -43,15 +45,16 @@ export function pushFrame(s, f) {
   for (let j = 0; j < 6; j++) { s.u[j].push(f.u[j]); s.u_ff[j].push(f.u_ff[j]); }
   s.sat.push(f.saturated || [0, 0, 0, 0, 0, 0]);
   s.inh_t.push(f.t); s.inh.push(f.inhomogeneity); s.spread.push(f.spread ?? null);
+  s.sigma_mean.push(f.sigma_mean ?? null);
   pushEstimators(s, f);
-  s.field = f.field;
+  s.field = f.field; s.fieldSigma = f.field_sigma || null;
   s.tc = f.tc;
   if (s.t.length > MAX_POINTS) thin(s);
 }
 
 function thin(s) { // keep every other sample: bounded memory for long runs
   const half = (a) => a.filter((_, k) => k % 2 === 0);
-  for (const k of ["t", "T_ref", "T_mean_hat", "eta", "sat", "inh_t", "inh", "spread"]) s[k] = half(s[k]);
+  for (const k of ["t", "T_ref", "T_mean_hat", "eta", "sat", "inh_t", "inh", "spread", "sigma_mean"]) s[k] = half(s[k]);
   s.tcErr = s.tcErr.map(half); s.u = s.u.map(half); s.u_ff = s.u_ff.map(half);
   s.shadowTc4Err = half(s.shadowTc4Err);
   for (const p of Object.values(s.params)) { p.v = half(p.v); p.s = half(p.s); }
@@ -67,6 +70,7 @@ export function seriesFromStored(d) {
   s.sat = d.saturated || d.t.map(() => [0, 0, 0, 0, 0, 0]);
   s.inh_t = d.t_field || []; s.inh = d.inhomogeneity || []; s.spread = d.spread || [];
   s.field = d.field || null;
+  s.sigma_mean = d.sigma_mean || d.t.map(() => null); s.fieldSigma = d.field_sigma || null;
   s.tc = d.tc.length ? d.tc[d.tc.length - 1] : null;
   for (const name of Object.keys(d.parameters || {})) {
     s.params[name] = { v: d.parameters[name], s: (d.parameter_sigma || {})[name] || d.t.map(() => null) };

@@ -303,6 +303,17 @@ class FE(_Section):
         return self
 
 
+class ModelError(_Section):
+    """Measured model-error statistics for the *reported* covariance (twin.estimation.process_noise).
+
+    Q_rep = q0 (q1 sign(M) + 1 1^T)^2 (the form of the filter's Q, constants from the measured one-step
+    error of the model against the truth) and the FE grid's representation error ``representation_rms`` (K)."""
+
+    q0: float = Field(gt=0)
+    q1: float = Field(ge=0)
+    representation_rms: float = Field(ge=0)
+
+
 class EKFWeights(_Section):
     q0: float = Field(gt=0)
     q1: float = Field(ge=0)
@@ -311,6 +322,7 @@ class EKFWeights(_Section):
     innovation_gate: float = Field(gt=0)
     jacobian_tolerance: float = Field(ge=0)
     covariance_precision: Literal["single", "double"]
+    model_error: ModelError | None = None  # None: the filter's own P is reported
 
 
 class ParameterValues(_Section):

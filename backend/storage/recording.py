@@ -13,6 +13,9 @@ One :class:`rerun.RecordingStream` per run, saved to its file before anything is
 - ``eta`` (m), ``inhomogeneity/estimated`` and ``inhomogeneity/true`` (K);
 - with a calibrating estimator ``calibration/<parameter>`` (relative deviation) and
   ``calibration/<parameter>_sigma``; with a shadow estimator ``tc/error_shadow/TC1..4`` (K).
+- the estimate's uncertainty (issue 25), when the run reports it: ``field/sigma`` (standard deviation of the
+  estimated field, N_y x N_x, K, Viridis over 0..``SIGMA_RANGE_K``) with the field images, and the scalars
+  ``uncertainty/sigma_mean`` (K, of the fillet mean) and ``uncertainty/nis`` (per reading);
 - ``events``: the run's events (start, live changes, re-plans, saturated groups, feasibility
   warnings, the end) as text logs (``rr.TextLog``, level INFO / WARN / ERROR) at their run time;
   ``faults/injected`` and ``faults/detected`` the fault events (the faults the simulated furnace started
@@ -49,6 +52,7 @@ log = logging.getLogger(__name__)
 APP_ID = "furnace-twin"
 TIMELINE = "t"
 TC_NAMES = ("TC1", "TC2", "TC3", "TC4")
+SIGMA_RANGE_K = 20.0  # colour range of field/sigma (K): fixed, so that images of a run compare
 _LEVELS = {"info": rr.TextLogLevel.INFO, "warn": rr.TextLogLevel.WARN, "error": rr.TextLogLevel.ERROR}
 
 
@@ -61,6 +65,8 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
                     "field/estimated", "field/fillet", "field/tc"]),
                 rrb.Spatial2DView(name="true field (K)", origin="field", contents=[
                     "field/true", "field/fillet", "field/tc"]),
+                rrb.Spatial2DView(name="sigma of the estimate (K)", origin="field", contents=[
+                    "field/sigma", "field/fillet", "field/tc"]),
             ),
             rrb.Vertical(
                 rrb.TimeSeriesView(name="fillet mean vs reference (K)", origin="temperature"),
@@ -73,6 +79,7 @@ def blueprint(group_names: tuple[str, ...]) -> rrb.Blueprint:
                 rrb.TimeSeriesView(name="feedforward u_ff (fraction of u_max)", origin="power/u_ff"),
                 rrb.TimeSeriesView(name="inhomogeneity (K)", origin="inhomogeneity"),
                 rrb.TimeSeriesView(name="eta (m)", origin="eta"),
+                rrb.TimeSeriesView(name="uncertainty: sigma of the fillet mean (K), NIS", origin="uncertainty"),
                 rrb.TextLogView(name="events", origin="events"),
             ),
             column_shares=[2, 2, 2],
@@ -186,6 +193,7 @@ class RecordingSink:
             "parameters": None if s.parameters is None else np.asarray(s.parameters, dtype=float),
             "parameter_sigma": None if s.parameter_sigma is None else np.asarray(s.parameter_sigma, dtype=float),
             "shadow_tc_hat": None if s.shadow_tc_hat is None else np.asarray(s.shadow_tc_hat, dtype=float),
+            "sigma_mean": getattr(s, "sigma_mean", None), "nis": getattr(s, "nis", None),
         })
         if s.t >= self._next_image_t:
             self._next_image_t = float(s.t) + self.image_interval
@@ -196,6 +204,10 @@ class RecordingSink:
                 self._log(f"field/{name}", rr.DepthImage(
                     np.asarray(field, dtype=np.float32), meter=1.0, colormap="Turbo",
                     depth_range=list(self.temperature_range)))
+            sigma = getattr(s, "field_sigma", None)
+            if sigma is not None:
+                self._log("field/sigma", rr.DepthImage(np.asarray(sigma, dtype=np.float32), meter=1.0,
+                                                       colormap="Viridis", depth_range=[0.0, SIGMA_RANGE_K]))
 
     def log_event(self, t: float, text: str, level: str = "info") -> None:
         """One event of the run as a text log at run time ``t`` (s); ``level`` info, warn or error.  A fault
@@ -243,6 +255,9 @@ class RecordingSink:
                 if np.isfinite(values[:, j]).any():
                     send(f"calibration/{name}", values[:, j])
                     send(f"calibration/{name}_sigma", sigma[:, j])
+        for key in ("sigma_mean", "nis"):
+            if all(r[key] is not None for r in rows):
+                send(f"uncertainty/{key}", np.array([r[key] for r in rows], dtype=float))
         if all(r["shadow_tc_hat"] is not None for r in rows):
             shadow_err = tc - np.stack([r["shadow_tc_hat"] for r in rows])
             for i, name in enumerate(TC_NAMES):

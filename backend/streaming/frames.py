@@ -12,6 +12,8 @@ that also read ``GET /api/runs/{id}/series`` shows each one once), ``spread`` (m
 |T_hat - fillet mean|, K) and ``saturated`` (per group: +1 at full power, -1 off, 0 in between).  With a calibrating
 estimator ``calibration`` ({name: {"value", "sigma"}}, relative deviations), with a shadow
 estimator ``shadow`` ({"T_mean_hat", "tc_hat", "field_delta": shadow minus estimate, N_y x N_x, K}).
+The estimate's uncertainty (issue 25): ``sigma_mean`` (K, standard deviation of ``T_mean_hat``), ``nis``
+and ``field_sigma`` (standard deviation of ``field``, N_y x N_x, K), when the run reports them.
 """
 
 from __future__ import annotations
@@ -70,6 +72,12 @@ class SnapshotLike(Protocol):
     def shadow_field_hat(self) -> Any: ...
     @property
     def late_samples(self) -> int: ...
+    @property
+    def field_sigma(self) -> Any: ...  # (N_y, N_x) K or None
+    @property
+    def sigma_mean(self) -> float | None: ...
+    @property
+    def nis(self) -> float | None: ...
 
 
 def finite_or_none(x: Any) -> float | None:
@@ -109,6 +117,9 @@ def scalar_values(s: SnapshotLike) -> dict[str, Any]:
     calibration = calibration_values(s)
     if calibration is not None:
         out["calibration"] = calibration
+    if getattr(s, "sigma_mean", None) is not None:
+        out["sigma_mean"] = finite_or_none(s.sigma_mean)
+        out["nis"] = finite_or_none(s.nis)
     if s.shadow_T_mean_hat is not None:
         out["shadow"] = {"T_mean_hat": finite_or_none(s.shadow_T_mean_hat), "tc_hat": _vector(s.shadow_tc_hat)}
     return out
@@ -153,6 +164,9 @@ def frame_dict(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
         field=_grid(field),
         events=events_of(s.events) if events is None else list(events),
     )
+    sigma = getattr(s, "field_sigma", None)
+    if sigma is not None:
+        frame["field_sigma"] = _grid(np.round(np.asarray(sigma, dtype=float), FIELD_DECIMALS))
     shadow_field = s.shadow_field_hat
     if shadow_field is not None and "shadow" in frame:
         delta = np.round(np.asarray(shadow_field, dtype=float) - np.asarray(s.field_hat, dtype=float), FIELD_DECIMALS)

@@ -49,7 +49,7 @@ NODES: dict[str, tuple[str, tuple[str, str] | None, str]] = {
     "T_mean_hat": ("Double", ("KEL", "K"), "estimated fillet mean temperature"),
     "T_sup_hat": ("Double", ("KEL", "K"), "estimated T_sup: max over the fillet of |T - T_ref|"),
     "TC4Error": ("Double", ("KEL", "K"), "validation thermocouple TC4 minus the estimate there"),
-    "FieldSigmaMean": ("Double", ("KEL", "K"), "mean standard deviation of the estimated field"),
+    "FieldSigmaMean": ("Double", ("KEL", "K"), "standard deviation of the estimated fillet mean T_mean_hat"),
     "LampEfficiency": ("Double", None, "calibrated lamp efficiency, relative deviation from the model"),
     "Emissivity": ("Double", None, "calibrated emissivity, relative deviation from the model"),
     "FieldMin": ("Double", ("KEL", "K"), "coldest cell of the estimated field"),

@@ -13,6 +13,8 @@ always kept); alongside:
 - ``events`` (every event, ``{n, t, text, level}``), ``changes`` (the live changes applied),
   ``windows`` (the metric windows, from the last reference change: ``twin.runs.metrics.windows_of``);
 - ``field``: the last estimated field; ``n_samples``, ``t_last``;
+- with the estimate's uncertainty (issue 25): ``sigma_mean`` (K, decimated like the scalars) and
+  ``field_sigma`` (the last field's standard deviation, N_y x N_x, K);
 - with a calibrating estimator (``twin.runs.record.OPTIONAL_SERIES``): ``parameters`` and
   ``parameter_sigma`` as ``{name: [...]}`` (relative deviations, decimated like the scalars) for the
   calibrated names only (``twin.model.tables.PARAMETERS`` with a finite value in some sample);
@@ -104,6 +106,10 @@ def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
         fidx = pick(len(tf), max_points)
         out["t_field"], out["inhomogeneity"], out["spread"] = tf[fidx], sup[fidx], spread[fidx]
         out["field"] = np.asarray(z["field_hat"][-1], dtype=float)
+        if "field_sigma" in z and len(z["field_sigma"]):
+            out["field_sigma"] = np.asarray(z["field_sigma"][-1], dtype=float)
+    if "sigma_mean" in z and len(z["sigma_mean"]):
+        out["sigma_mean"] = np.asarray(z["sigma_mean"], dtype=float)[idx]
     out.update(estimator_series(z, idx))
     out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(load_events(z))]
     out["changes"] = [{"t": c.t, "kind": c.kind, "body": c.body} for c in load_changes(z)]

@@ -44,6 +44,7 @@ class Controls:
     toggle_oscillation: Any
     stop: Any
     show_housing: Any
+    show_sigma: Any
     message: Any
 
     def say(self, text: str) -> None:
@@ -75,6 +76,9 @@ def build_controls(gui: viser.GuiApi, limits: ScenarioLimits) -> Controls:
         stop = gui.add_button("Stop run", color="red")
     with gui.add_folder("View", expand_by_default=False):
         show_housing = gui.add_checkbox("Show housing", False)
+        show_sigma = gui.add_checkbox("Colour by sigma", False,
+                                      hint="the plate shows the estimate's standard deviation (K) instead of the field")
     message = gui.add_markdown("")
     return Controls(run, status, legend, setpoint, t_E, duration, speed, oscillate, amplitude, period, start,
-                    new_setpoint, new_t_E, change_reference, toggle_oscillation, stop, show_housing, message)
+                    new_setpoint, new_t_E, change_reference, toggle_oscillation, stop, show_housing, show_sigma,
+                    message)

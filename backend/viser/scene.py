@@ -41,6 +41,14 @@ def turbo_rgb(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return (colormaps["turbo"](x)[..., :3] * 255).astype(np.uint8)
 
 
+def sigma_rgb(values: np.ndarray, hi: float) -> np.ndarray:
+    """Standard deviations (K) -> uint8 RGB with matplotlib's Blues over [0, hi] (not to be read as temperature)."""
+    from matplotlib import colormaps
+
+    x = np.clip(np.asarray(values, dtype=float) / max(hi, 1e-9), 0.0, 1.0)
+    return (colormaps["Blues"](0.1 + 0.9 * x)[..., :3] * 255).astype(np.uint8)
+
+
 def colour_range(field: np.ndarray, step: float = 5.0) -> tuple[float, float]:
     """Colour range (K) of the plate: its min..max widened to multiples of ``step`` and to at
     least ``MIN_SPAN_K``, so the colours do not flicker with the noise of the estimate."""
@@ -188,13 +196,21 @@ class FurnaceScene:
             for h in self.housing:
                 h.visible = visible
 
-    def show(self, snap: SnapshotLike, tc_positions: Sequence[tuple[float, float]]) -> tuple[float, float]:
+    def show(self, snap: SnapshotLike, tc_positions: Sequence[tuple[float, float]],
+             sigma: bool = False) -> tuple[float, float]:
         """Put one snapshot on the scene (plate colours and position, lamps, TCs at ``tc_positions``
-        in m at eta = 0); returns the plate's colour range (K)."""
-        field = np.asarray(snap.field_hat, dtype=float)
-        lo, hi = colour_range(field)
+        in m at eta = 0); returns the plate's colour range (K).  ``sigma``: the plate shows the estimate's
+        standard deviation (``field_sigma``, Blues from 0 K) instead of the field, when the snapshot has it."""
+        field_sigma = getattr(snap, "field_sigma", None)
         eta = float(snap.eta)
-        colours = turbo_rgb(vertex_values(field), lo, hi)
+        if sigma and field_sigma is not None:
+            values = vertex_values(np.asarray(field_sigma, dtype=float))
+            lo, hi = 0.0, float(np.ceil(np.nanmax(values))) if np.isfinite(values).any() else 1.0
+            colours = sigma_rgb(values, hi)
+        else:
+            field = np.asarray(snap.field_hat, dtype=float)
+            lo, hi = colour_range(field)
+            colours = turbo_rgb(vertex_values(field), lo, hi)
         rgb = lamp_colors(self.cfg, np.asarray(snap.u))
         with self.server.atomic():
             if self.plate_rgb is None or not np.array_equal(colours, self.plate_rgb):

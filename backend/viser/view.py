@@ -181,6 +181,10 @@ class FurnaceView:
             assert self.scene is not None
             self.scene.show_housing(g.show_housing.value)
 
+        @g.show_sigma.on_update
+        def _(_: Any) -> None:
+            self._last_seq, self._static_key = -1, None  # redraw the shown sample in the other colouring
+
     def _may_act(self, event: Any) -> bool:
         """Whether the client behind a GUI event may start, change or stop runs (``ClientAccess``)."""
         assert self.gui is not None
@@ -317,10 +321,12 @@ class FurnaceView:
     def show(self, snap: SnapshotLike, run_id: str, status: str, live: bool | None = None) -> None:
         """Put one snapshot on the scene and its run's status on the panel (``live``: a going run's sample)."""
         assert self.scene is not None and self.gui is not None
-        lo, hi = self.scene.show(snap, self.cfg.tc_positions(self._tc4(run_id)))
+        sigma = bool(self.gui.show_sigma.value) and getattr(snap, "field_sigma", None) is not None
+        lo, hi = self.scene.show(snap, self.cfg.tc_positions(self._tc4(run_id)), sigma=sigma)
         self._shown_id = run_id
         self.gui.status.content = status_text(snap, run_id, status, live)
-        self.gui.legend.content = f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)"
+        self.gui.legend.content = (f"plate colour: sigma of the estimate {lo:.0f} K (white) … {hi:.0f} K (dark blue)"
+                                   if sigma else f"plate colour (turbo): {lo:.0f} K (blue) … {hi:.0f} K (red)")
 
     def _tc4(self, run_id: str) -> tuple[float, float] | None:
         try:

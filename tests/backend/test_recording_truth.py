@@ -42,3 +42,21 @@ def test_true_series_only_with_truth(tmp_path, small_cfg, isolated_home, truth) 
     assert "/temperature/T_mean_hat" in stats and "/field/estimated" in stats
     for entity in ("/temperature/true_mean", "/inhomogeneity/true", "/field/true"):
         assert (entity in stats) == truth, entity
+
+
+@pytest.mark.parametrize("sigma", [False, True])
+def test_uncertainty_only_when_the_run_reports_it(tmp_path, small_cfg, isolated_home, sigma) -> None:
+    """field/sigma and uncertainty/* (issue 25) are written when the snapshots carry field_sigma, never made up."""
+    from dataclasses import replace
+
+    rrd = tmp_path / "recording.rrd"
+    sink = RecordingSink(small_cfg, f"sigma-{sigma}", rrd, tc_positions=small_cfg.tc_positions(), image_interval=0.1)
+    for j in range(5):
+        snap = _snap(j, small_cfg, True)
+        if sigma:
+            snap = replace(snap, field_sigma=np.full(snap.field_hat.shape, 2.0), sigma_mean=1.0, nis=0.8)
+        sink.add(snap)
+    sink.close()
+    stats = _entities(rrd, isolated_home)
+    for entity in ("/field/sigma", "/uncertainty/sigma_mean", "/uncertainty/nis"):
+        assert (entity in stats) == sigma, entity

@@ -79,3 +79,34 @@ def test_scene_runs_like_the_heat_map_and_names_its_parts(small_cfg) -> None:
             assert part in labels, part
     finally:
         server.stop()
+
+
+def test_scene_colours_the_plate_by_sigma_when_asked(small_cfg) -> None:
+    """With "Colour by sigma" the plate shows field_sigma (Blues from 0 K: a larger sigma is darker), and the
+    field's turbo colours otherwise or when the snapshot has no sigma."""
+    from dataclasses import replace
+
+    import viser
+
+    from backend.viser import FurnaceScene
+    from twin.runs.record import Snapshot
+
+    s = small_cfg.specimen
+    sigma = np.tile(np.linspace(0.5, 8.0, s.nx), (s.ny, 1))  # grows along x
+    snap = Snapshot(j=0, t=0.0, eta=0.0, T_ref=900.0, T_mean_hat=900.0, field_hat=np.full((s.ny, s.nx), 900.0),
+                    field_true=None, tc=np.full(4, 900.0), tc_hat=np.full(4, 900.0), u=np.zeros(6), u_ff=np.zeros(6),
+                    inhomogeneity=0.0, true_mean=None, true_inhomogeneity=None, field_sigma=sigma)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        scene = FurnaceScene(server, small_cfg)
+        lo, hi = scene.show(snap, small_cfg.tc_positions(), sigma=True)
+        assert (lo, hi) == (0.0, 8.0)
+        rgb = scene.plate_rgb.astype(float).reshape(s.ny + 1, s.nx + 1, 3)
+        assert rgb[:, -1].sum() < rgb[:, 0].sum()  # darker where sigma is larger
+        flat = scene.plate_rgb.copy()
+        scene.show(snap, small_cfg.tc_positions(), sigma=False)  # a uniform field: one colour
+        assert not np.array_equal(flat, scene.plate_rgb) and len(np.unique(scene.plate_rgb, axis=0)) == 1
+        scene.show(replace(snap, field_sigma=None), small_cfg.tc_positions(), sigma=True)
+        assert len(np.unique(scene.plate_rgb, axis=0)) == 1
+    finally:
+        server.stop()

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.estimation.ekf import EKFState, UpdateInfo, ekf_update, process_noise, propagate_covariance
+from twin.estimation.process_noise import ReportedCovariance, reported_process_noise
 from twin.model.parametric import Evaluation, ParametricModel
 from twin.model.tables import PARAMETERS, Parameters
 
@@ -93,6 +94,10 @@ class JointEstimator:
         self.R = e.r0 * np.eye(C.shape[0])
         self.gate = e.innovation_gate
         self.last_info: UpdateInfo | None = None
+        #: the covariance the twin reports (twin.estimation.process_noise), None: the filter's own P is reported
+        self.reported: ReportedCovariance | None = None
+        if e.model_error is not None:
+            self.reported = ReportedCovariance(P0, reported_process_noise(fe.M, e.model_error, self.Q[n:, n:]))
         self._cov_dtype = np.float32 if e.covariance_precision == "single" else np.float64
         self._tol = e.jacobian_tolerance
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))
@@ -123,6 +128,25 @@ class JointEstimator:
         """Standard deviations (k,) of the calibrated parameters, in the order of ``model.calibrated``."""
         return np.sqrt(np.clip(np.diag(self._x.P)[self.n:], 0.0, None))
 
+    @property
+    def reported_P(self) -> Array:
+        """The temperature part (n, n) of the covariance the twin reports (module docstring of
+        :mod:`twin.estimation.process_noise`; the filter's own P without ``[ekf.model_error]``)."""
+        n = self.n
+        return self._x.P[:n, :n] if self.reported is None else self.reported.P[:n, :n]
+
+    @property
+    def nis(self) -> float:
+        """Normalised innovation squared of the last update per reading used, against the reported
+        covariance (NaN before the first update or when no reading was used)."""
+        info = self.last_info
+        if self.reported is not None:
+            return self.reported.nis
+        if info is None or info.S is None or not info.used.any():
+            return float("nan")
+        nu, S = info.innovation[info.used], info.S[np.ix_(info.used, info.used)]
+        return float(nu @ np.linalg.solve(S, nu)) / int(info.used.sum())
+
     def calibration(self) -> dict[str, dict[str, float]]:
         """``{name: {"value", "sigma"}}`` of the calibrated parameters (product.md ``calibration``)."""
         p, s = self.parameters, self.parameter_sigma
@@ -143,6 +167,9 @@ class JointEstimator:
         ``learn=False``: the parameters are consider states (:func:`twin.estimation.ekf.ekf_update`): kept,
         their uncertainty still counted."""
         x, self.last_info = ekf_update(self._x, y, self.C, self.R, self.gate, 0 if learn else self.k)
+        info = self.last_info
+        if self.reported is not None and info.gain is not None:
+            self.reported.update(info.gain, self.C, self.R, info.innovation, info.used)
         if self.k:
             p = x.theta[self.n:]
             clipped = np.clip(p, self._lo, self._hi)
@@ -160,6 +187,8 @@ class JointEstimator:
         Phi = self._jacobian(e, eta, p)
         theta_next = theta + self.model.t_s * e.rate
         P = propagate_covariance(Phi, self._x.P, self.Q)
+        if self.reported is not None:
+            self.reported.predict(Phi)
         self._x = EKFState(np.concatenate([theta_next, self._x.theta[n:]]), P)
         return self.state
 

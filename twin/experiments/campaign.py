@@ -145,13 +145,13 @@ def model_error_table(experiments: list[dict[str, Any]]) -> str:
 
 
 def worst(metrics: list[dict[str, Any]]) -> dict[str, Any]:
-    """Key by key the largest finite value of several metric objects (None where none is finite); every
-    metric here is an error, so the largest is the worst."""
+    """Key by key the worst finite value of several metric objects (None where none is finite): the largest
+    error, the smallest coverage (``coverage_*``: the share of the truth inside the reported band)."""
     out: dict[str, Any] = {}
     for key in dict.fromkeys(k for m in metrics for k in m):
         vals = [m.get(key) for m in metrics]
         finite = [float(v) for v in vals if isinstance(v, int | float) and np.isfinite(v)]
-        out[key] = max(finite) if finite else None
+        out[key] = (min if key.startswith("coverage_") else max)(finite) if finite else None
     return out
 
 

@@ -56,6 +56,8 @@ import numpy as np
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
+from twin.estimation.consistency import cell_nees
+from twin.estimation.uncertainty import FieldUncertainty
 from twin.furnace.interface import FaultInjectable, Furnace, Readings, delivered
 from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
@@ -159,6 +161,9 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self.fillet = Fillet.of(cfg)
         self.tc_positions = np.asarray(furnace.tc_positions, float)
         self._phi_tc = self._ctl.model.fe.phi(self.tc_positions)
+        model_error = cfg.ekf.model_error
+        self.uncertainty = FieldUncertainty(self._ctl.model.fe,
+                                            0.0 if model_error is None else model_error.representation_rms)
         self._has_truth = furnace.true_field() is not None
         header = RunHeader(
             x=self.x, y=self.y, tc_positions=self.tc_positions, L_s=s.length, W_s=s.width,
@@ -233,6 +238,8 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             T_ref = float(self._ref_samples[j])
 
             field_hat = ctl.model.fe.field_on_cells(theta)  # the cells are self.x, self.y
+            P = self.estimator.reported_P  # what the twin claims about its estimate (issue 25)
+            field_sigma = self.uncertainty.field_sigma(P)
             truth = self.furnace.true_field()
             events, self._events = tuple(self._events), []
             snap = Snapshot(
@@ -245,6 +252,9 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
                 true_inhomogeneity=None if truth is None else float(self.fillet.sup(truth, T_ref)),
                 events=events, tc_status=tuple(readings.status), late_samples=self.late_samples,
                 blind_since=self.blindness.blind_since,
+                field_sigma=field_sigma, sigma_mean=self.uncertainty.mean_sigma(P), nis=self.estimator.nis,
+                nees=None if truth is None else float(cell_nees(field_hat, truth.reshape(field_hat.shape),
+                                                                field_sigma, self.fillet.mask)),
                 **self.estimators.outputs(shadow, self._phi_tc, ctl.model.fe),
             )
             problem = self._guard.check(snap, left_out=self.detector.excluded)

@@ -169,6 +169,24 @@ METRIC_WORDS: dict[str, tuple[str, str]] = {
         "Field estimation error, steady (max)",
         "largest |estimate - true field| over the fillet in the steady window (simulations only)"),
 }
+#: the uncertainty metrics in words (not relative errors: shares and normalised squares)
+UNCERTAINTY_WORDS: dict[str, tuple[str, str]] = {
+    "coverage_2sigma_transient": (
+        "2-sigma coverage, transient",
+        "share of fillet cells x samples where the true field lies within +-2 sigma of the estimate, transient "
+        "window (simulations only; 0.954 if the reported sigma is right and the errors Gaussian)"),
+    "coverage_2sigma_steady": (
+        "2-sigma coverage, steady",
+        "the same in the steady window (simulations only)"),
+    "nees_mean": (
+        "NEES per cell, steady (mean)",
+        "mean of ((estimate - true field) / sigma)^2 over the fillet and the steady window: 1 when the reported "
+        "sigma is right, above 1 over-confident (simulations only)"),
+    "nis_mean": (
+        "NIS per reading (mean)",
+        "mean of the normalised innovation squared of TC1-3 per reading against the reported covariance: 1 "
+        "when consistent"),
+}
 
 
 def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"],
@@ -246,7 +264,38 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
     }
     if "field_true" in ts:  # the transient seen in the true field: what the estimated mean error hides
         out["true_mean_error_transient_max"] = _max(true_mean_err, trf)
+    if "field_sigma" in ts:
+        out.update(uncertainty_metrics(ts, used, trf, stf, fillet, after))
     return _extras(ts, out, t, st, tc_err)
+
+
+#: the uncertainty metrics (issue 25) of a run that records ``field_sigma``
+UNCERTAINTY_KEYS = ("coverage_2sigma_transient", "coverage_2sigma_steady", "nees_mean", "nis_mean")
+
+
+def uncertainty_metrics(ts: Mapping[str, Any], used: NDArray[np.bool_], trf: NDArray[np.bool_],
+                        stf: NDArray[np.bool_], fillet: Fillet, after: NDArray[np.bool_]) -> dict[str, float]:
+    """Is the reported uncertainty true (:mod:`twin.estimation.consistency`)?  ``coverage_2sigma_*``: share of
+    the fillet's cells x field samples of the window with |field_hat - field_true| <= 2 field_sigma;
+    ``nees_mean``: mean over the steady window's fields of the per-cell NEES over the fillet (1 when
+    consistent); without a true field these are NaN.  ``nis_mean``: mean of ``nis`` (per reading, 1 when
+    consistent) after the first t_E / 10.  ``used`` selects the fields of the two windows, ``trf``/``stf``
+    those of each among them."""
+    from twin.estimation.consistency import cell_nees, coverage
+
+    out = {k: float("nan") for k in UNCERTAINTY_KEYS}
+    if "nis" in ts and len(ts["nis"]):
+        out["nis_mean"] = _mean(np.asarray(ts["nis"], float), after)
+    if "field_true" not in ts or not used.any():
+        return out
+    sigma = np.asarray(np.asarray(ts["field_sigma"])[used], float)[..., fillet.mask]
+    err = (np.asarray(np.asarray(ts["field_hat"])[used], float)
+           - np.asarray(np.asarray(ts["field_true"])[used], float))[..., fillet.mask]
+    out["coverage_2sigma_transient"] = coverage(err[trf], sigma[trf])
+    out["coverage_2sigma_steady"] = coverage(err[stf], sigma[stf])
+    if stf.any():
+        out["nees_mean"] = float(np.mean(cell_nees(err[stf], 0.0, sigma[stf], np.ones(err.shape[-1], bool))))
+    return out
 
 
 def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc_err: Array,

@@ -11,6 +11,8 @@ growing arrays and writes them in the ``timeseries.npz`` layout:
   the end of the metrics' windows, moved by a live reference change), then every ``field_every``-th (the
   loop: one per second, the least product.md allows), so a long run's memory grows by the scalars and
   about 3.5 kB per second;
+* the estimate's uncertainty (issue 25): ``field_sigma`` (m, N_y, N_x) K beside ``field_hat``, ``sigma_mean``
+  (n,) K (of the fillet mean), ``nis`` (n,) and, with a true field, ``nees`` (n,) (:mod:`twin.runs.consistency`);
 * with a calibrating estimator: ``parameters``, ``parameter_sigma`` (n, 3) relative deviations (lamp
   efficiency, emissivity, convection; NaN where not calibrated); with a shadow estimator:
   ``shadow_T_mean_hat`` (n,), ``shadow_tc_hat`` (n, 4), ``shadow_field_hat`` (m, N_y, N_x);
@@ -63,10 +65,13 @@ Array = NDArray[np.float64]
 
 #: per-sample series of a Snapshot that the record keeps (its attribute names), and the field series
 SAMPLE_SERIES = ("t", "eta", "T_ref", "T_mean_hat", "tc", "tc_hat", "u", "u_ff")
-FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat")
+FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat", "field_sigma")
 #: series a run has only with the matching estimator: calibrated parameters (relative deviations in the
-#: order of twin.model.tables.PARAMETERS, NaN where not calibrated) and a shadow estimator's outputs
-OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat")
+#: order of twin.model.tables.PARAMETERS, NaN where not calibrated), a shadow estimator's outputs, and the
+#: estimate's uncertainty (twin.estimation.uncertainty: ``field_sigma`` K, ``sigma_mean`` K of the fillet
+#: mean, ``nis`` per reading, ``nees`` per fillet cell: twin.runs.consistency; ``nees`` needs a true field)
+OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat",
+                   "field_sigma", "sigma_mean", "nis", "nees")
 #: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
 TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
 
@@ -102,6 +107,10 @@ class Snapshot:
     tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
     late_samples: int = 0  # samples of the run so far with a reading that did not come in time
     blind_since: float | None = None  # run time since which no TC reading reached the estimate (degraded)
+    field_sigma: Array | None = None  # (N_y, N_x) standard deviation of field_hat, K
+    sigma_mean: float | None = None  # standard deviation of T_mean_hat, K
+    nis: float | None = None  # normalised innovation squared per TC reading used (1 when consistent)
+    nees: float | None = None  # mean over the fillet of ((field_hat - field_true) / field_sigma)^2
 
 
 @dataclass(frozen=True)
@@ -371,9 +380,12 @@ def last_snapshot(arrays: Mapping[str, Any]) -> StoredSnapshot | None:
     field = np.asarray(fh[-1], float) if fh is not None and len(fh) and fh.shape[1:] == shape else None
     ft = arrays.get("field_true")
     truth = np.asarray(ft[-1], float) if ft is not None and len(ft) and ft.shape[1:] == shape else None
+    fs = arrays.get("field_sigma")
+    sigma = np.asarray(fs[-1], float) if fs is not None and len(fs) and fs.shape[1:] == shape else None
     return StoredSnapshot(
         j=len(arrays["t"]) - 1, t=float(last("t")), eta=float(np.nan_to_num(last("eta"))), T_ref=float(last("T_ref")),
         T_mean_hat=T_mean, field_hat=field if field is not None else np.full(shape, T_mean), field_true=truth,
         tc=last("tc", 4), tc_hat=last("tc_hat", 4), u=last("u", 6), u_ff=last("u_ff", 6),
         inhomogeneity=float("nan"), true_mean=None, true_inhomogeneity=None, has_field=field is not None,
+        field_sigma=sigma, sigma_mean=float(last("sigma_mean")) if "sigma_mean" in arrays else None,
     )

@@ -1,0 +1,89 @@
+"""Measure the model-error statistics of ``[ekf.model_error]`` and check the reported uncertainty (issue 25).
+
+    python scripts/model_error_stats.py measure --config default --oscillate --seeds 10 11 12 \\
+        --references 1000:90 1050:150 --runs /tmp/me-runs
+    python scripts/model_error_stats.py check --config banded --seeds 50 51 --references 1100:120 --runs /tmp/me-runs
+
+``measure`` runs the closed loop against the honest truth for each seed and reference (duration 2 t_E; a run
+already in ``--runs`` is reused) and prints the one-step defect's fitted q0, q1 and the representation rms
+(:mod:`twin.experiments.model_error_stats`) and, for each ``--scales`` factor on q0, the coverage, NEES and NIS
+of the runs replayed with it.  ``check`` prints the metrics of the runs replayed with the furnace file's
+``[ekf.model_error]`` as a Markdown table (``docs/uncertainty.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+KEYS = ("coverage_2sigma_transient", "coverage_2sigma_steady", "nees_mean", "nis_mean",
+        "field_estimation_error_steady_max", "tc4_error_steady_max")
+
+
+def run_once(cfg: Any, furnace: str, osc: bool, seed: int, setpoint: float, t_E: float, folder: Path) -> Path:
+    from twin.runs.loop import ClosedLoop
+    from twin.runs.record import save_arrays
+    from twin.scenario import Scenario
+
+    path = folder / f"{furnace}-{'osc' if osc else 'fixed'}-{seed}-{int(setpoint)}-{int(t_E)}.npz"
+    if not path.exists():
+        sc = Scenario(reference={"setpoint": setpoint, "t_E": t_E}, duration=2 * t_E, oscillation={"enabled": osc},
+                      seed=seed)
+        loop = ClosedLoop(cfg, sc)
+        for _ in loop.run():
+            pass
+        save_arrays(path, loop.timeseries())
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    from twin.config import load_config
+    from twin.estimation.choice import estimator_model
+    from twin.experiments.model_error_stats import model_error_statistics, replay_metrics
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.runs.record import load_arrays
+    from twin.scenario import EstimatorChoice, Scenario
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("what", choices=("measure", "check"))
+    ap.add_argument("--config", default="default")
+    ap.add_argument("--oscillate", action="store_true")
+    ap.add_argument("--seeds", type=int, nargs="+", required=True)
+    ap.add_argument("--references", nargs="+", default=["1100:120"], help="setpoint:t_E pairs (K:s)")
+    ap.add_argument("--scales", type=float, nargs="+", default=[1.0, 5.0, 20.0])
+    ap.add_argument("--runs", type=Path, required=True, help="folder for the runs' time series (reused)")
+    args = ap.parse_args(argv)
+    cfg = load_config(None if args.config == "default" else args.config)
+    args.runs.mkdir(parents=True, exist_ok=True)
+    refs = [tuple(float(v) for v in r.split(":")) for r in args.references]
+    paths = [run_once(cfg, args.config, args.oscillate, s, sp, tE, args.runs) for s in args.seeds for sp, tE in refs]
+    runs = [load_arrays(p) for p in paths]
+    tables = model_tables(cfg, radiation_model(cfg))
+    if args.what == "measure":
+        def model_for(ts: Any) -> Any:
+            sc = Scenario.model_validate_json(str(ts["scenario"]))
+            return estimator_model(EstimatorChoice(calibrate=False), tables, sc.oscillation, cfg)
+
+        stats = model_error_statistics(cfg, runs, model_for)
+        sys.stdout.write(json.dumps(stats) + "\n")
+        for c in args.scales:
+            me = {"q0": c * stats["q0"], "q1": stats["q1"], "representation_rms": stats["representation_rms"]}
+            scaled = cfg.with_overrides({"ekf.model_error": me})
+            ms = [replay_metrics(scaled, ts, tables)[0] for ts in runs]
+            sys.stdout.write(json.dumps({"scale": c, **{k: [round(m[k], 4) for m in ms] for k in KEYS[:4]}}) + "\n")
+        return 0
+    rows = ["| run | " + " | ".join(KEYS) + " |", "|---" * (len(KEYS) + 1) + "|"]
+    for p, ts in zip(paths, runs, strict=True):
+        m, _ = replay_metrics(cfg, ts, tables)
+        cells = [f"{m[k]:.3f}" if k.startswith(("coverage", "nees", "nis")) else f"{100 * m[k]:.2f} %" for k in KEYS]
+        rows.append(f"| {p.stem} | " + " | ".join(cells) + " |")
+    sys.stdout.write("\n".join(rows) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,112 @@
+"""NEES of a linear Kalman filter against its chi-square bounds, and the reported covariance of a suboptimal
+filter (twin.estimation.consistency, twin.estimation.process_noise)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.estimation.consistency import cell_nees, chi2_interval, coverage, nees
+from twin.estimation.ekf import EKFState, ekf_update
+from twin.estimation.process_noise import ReportedCovariance
+
+# a damped 3-state system observed by 2 sensors (arbitrary, stable, not diagonal)
+A = np.array([[0.95, 0.05, 0.0], [0.02, 0.9, 0.05], [0.0, 0.1, 0.85]])
+C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+R = np.diag([0.5, 0.8])
+Q_TRUE = np.array([[0.3, 0.1, 0.0], [0.1, 0.4, 0.1], [0.0, 0.1, 0.2]])
+RUNS, STEPS = 200, 40
+
+
+def _simulate(Q_filter: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RUNS Monte Carlo runs of the truth (process noise Q_TRUE) and a Kalman filter tuned with Q_filter;
+    returns per step the mean NEES against the filter's own P and against the reported covariance (Q_TRUE
+    propagated with the filter's gain), and the innovations' mean NIS per reading against the reported one."""
+    rng = np.random.default_rng(seed)
+    own, rep, nis = np.zeros(STEPS), np.zeros(STEPS), np.zeros(STEPS)
+    for _ in range(RUNS):
+        x = rng.multivariate_normal(np.zeros(3), np.eye(3))
+        state = EKFState(np.zeros(3), np.eye(3))
+        report = ReportedCovariance(np.eye(3), Q_TRUE)
+        for k in range(STEPS):
+            x = A @ x + rng.multivariate_normal(np.zeros(3), Q_TRUE)
+            state = EKFState(A @ state.theta, A @ state.P @ A.T + Q_filter)
+            report.predict(A)
+            y = C @ x + rng.multivariate_normal(np.zeros(2), R)
+            state, info = ekf_update(state, y, C, R, gate=np.inf)
+            report.update(info.gain, C, R, info.innovation, info.used)
+            own[k] += nees(state.theta - x, state.P) / RUNS
+            rep[k] += nees(state.theta - x, report.P) / RUNS
+            nis[k] += report.nis / RUNS
+    return own, rep, nis
+
+
+def test_nees_of_a_matched_filter_lies_within_the_chi_square_bounds() -> None:
+    """Q_filter = Q_TRUE: the filter is optimal, its own P is the error covariance and the reported one equals
+    it.  The mean NEES over 200 runs at each step lies in the 99 % region of chi2(3 * 200) / 200 (so about one
+    step in a hundred may fall out by chance: allow two of 40)."""
+    own, rep, nis = _simulate(Q_TRUE, seed=11)
+    lo, hi = chi2_interval(dof=3, runs=RUNS, probability=0.99)
+    assert np.sum((own < lo) | (own > hi)) <= 2, own
+    np.testing.assert_allclose(rep, own, rtol=1e-9)
+    lo2, hi2 = chi2_interval(dof=2, runs=RUNS, probability=0.99)  # NIS per reading: chi2(2) / 2
+    assert np.sum((2 * nis < lo2) | (2 * nis > hi2)) <= 2, nis
+
+
+def test_the_reported_covariance_of_a_mistuned_filter_is_consistent_where_its_own_p_is_not() -> None:
+    """A filter tuned with a tenth of the true process noise is over-confident: its own NEES leaves the
+    chi-square region (a plausible bug: reporting the filter's P).  The reported covariance (the true Q
+    propagated with the filter's actual gain) is the error covariance of that suboptimal filter: its NEES
+    stays inside."""
+    own, rep, _ = _simulate(0.1 * Q_TRUE, seed=12)
+    lo, hi = chi2_interval(dof=3, runs=RUNS, probability=0.99)
+    assert np.mean(own[10:] > hi) > 0.9, own
+    assert np.sum((rep < lo) | (rep > hi)) <= 2, rep
+
+
+def test_reported_update_is_the_joseph_form_written_out() -> None:
+    """(I - L C) P (I - L C)^T + L R L^T for a gain that is not the optimal one (here: half of it)."""
+    rng = np.random.default_rng(2)
+    F = rng.normal(size=(3, 3))
+    P = F @ F.T + np.eye(3)
+    L = 0.5 * P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    rep = ReportedCovariance(P, np.zeros((3, 3)))
+    rep.update(L, C, R, np.array([0.3, -0.2]), np.array([True, True]))
+    I_LC = np.eye(3) - L @ C
+    np.testing.assert_allclose(rep.P, I_LC @ P @ I_LC.T + L @ R @ L.T, rtol=1e-12)
+
+
+def test_coverage_and_cell_nees() -> None:
+    err = np.array([[0.0, 1.0], [2.5, -1.9]])
+    assert coverage(err, np.ones_like(err)) == 0.75  # 2.5 > 2 sigma, -1.9 within
+    assert np.isnan(coverage(np.array([np.nan]), np.ones(1)))
+    z = cell_nees(err, np.zeros_like(err), np.full_like(err, 2.0), np.array([True, False]))
+    np.testing.assert_allclose(z, [0.0, (2.5 / 2) ** 2])
+
+
+def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
+    """[ekf.model_error] changes what the twin reports, never its estimate: the joint filter with and without it
+    (small furnace, calibrating, position-aware, 30 samples of a heat-up with a reading 2 K off) gives identical
+    theta and filter P, while the reported covariance differs from the filter's."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice
+
+    cfg = small_config()
+    assert cfg.ekf.model_error is not None
+    plain = cfg.with_overrides({"ekf.model_error": None})
+    tables = model_tables(cfg, radiation_model(cfg))
+    a = build_estimator(EstimatorChoice(), tables, None, cfg, 300.0)
+    b = build_estimator(EstimatorChoice(), tables, None, plain, 300.0)
+    assert a.reported is not None and b.reported is None
+    u = np.full(6, 0.6)
+    for j in range(30):
+        y = np.array([300.0 + 2.0 * j, 302.0 + 2.0 * j, 300.0 + 2.0 * j])
+        for est in (a, b):
+            est.update(y, learn=j > 10)
+            est.predict(u, 0.0)
+    np.testing.assert_array_equal(a.state.theta, b.state.theta)
+    np.testing.assert_array_equal(a.state.P, b.state.P)
+    np.testing.assert_array_equal(b.reported_P, b.state.P)  # without model error the filter's P is reported
+    assert not np.allclose(a.reported_P, a.state.P)

@@ -1,0 +1,129 @@
+"""Model-error statistics for the reported covariance (``[ekf.model_error]``, :mod:`twin.estimation.process_noise`).
+
+From closed-loop runs against the honest truth (the simulated furnace is not the twin's model), per field
+sample j with a field at j + 1 as well:
+
+* the true field's best FE representation theta*_j = argmin ||M_theta theta - T_true,j|| (least squares on the
+  FD cells) and what it leaves, r_j = T_true,j - M_theta theta*_j: ``representation_rms`` is the rms of r over
+  the fillet's cells and the samples (the FE grid's share of the error, no filter can remove it);
+* the one-step defect of the estimator's model (position-aware, nominal parameters) on that representation,
+  d_j = theta*_{j+1} - F(theta*_j, u_j; eta_j) (eqs. 12a, 14): the process noise the model really has;
+  its second moment D = mean d d^T (bias included: a systematic error is noise to the filter);
+* q0, q1 of Q = q0 (q1 sign(M) + 1 1^T)^2 (the filter's form, section 3.2) fitted to D in the Frobenius norm
+  (q0 in closed form for each q1 on a log grid).
+
+:func:`replay_metrics` re-runs a run's estimator on its stored readings, inputs and positions with another
+configuration's reported covariance (the estimate itself does not depend on it) and gives the run's metrics with
+that ``field_sigma``/``nis``: how a scale of q0 is tuned and checked without re-running the furnace.
+
+Example
+-------
+>>> import numpy as np
+>>> S = np.sign(np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 1.0], [0.0, 1.0, 2.0]]))
+>>> q0, q1 = fit_form(0.3 * np.linalg.matrix_power(0.7 * S + np.ones((3, 3)), 2), S)
+>>> round(q0, 4), round(q1, 2)
+(0.3, 0.7)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.config import FurnaceConfig
+from twin.physics.fillet import Fillet
+from twin.scenario import Scenario
+
+Array = NDArray[np.float64]
+
+
+def fit_form(D: Array, S: Array) -> tuple[float, float]:
+    """(q0, q1) minimising ||D - q0 (q1 S + 1 1^T)^2||_F (S = sign(M)); q1 on a log grid refined twice."""
+    n = D.shape[0]
+    J = np.ones((n, n))
+
+    def best(q1: float) -> tuple[float, float]:
+        B = np.linalg.matrix_power(q1 * S + J, 2)
+        q0 = max(float(np.sum(D * B) / np.sum(B * B)), 1e-30)
+        return float(np.linalg.norm(D - q0 * B)), q0
+
+    grid = np.concatenate([[0.0], np.logspace(-3, 3, 61)])
+    for _ in range(3):
+        scores = [best(q)[0] for q in grid]
+        i = int(np.argmin(scores))
+        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+        grid = np.linspace(lo, hi, 41)
+    q1 = float(grid[int(np.argmin([best(q)[0] for q in grid]))])
+    return best(q1)[1], q1
+
+
+def defects(cfg: FurnaceConfig, ts: Mapping[str, Any], model: Any) -> tuple[Array, Array]:
+    """One-step defects d_j (m, n) K and representation residuals over the fillet (m', cells) K of one run
+    (``timeseries.npz`` layout with ``field_true``); ``model`` the estimator's (``step(theta, u, eta)``)."""
+    fe = model.fe
+    Mt = np.asarray(fe.M_theta, float)
+    pinv = np.linalg.pinv(Mt)
+    t, u, eta = np.asarray(ts["t"], float), np.asarray(ts["u"], float), np.asarray(ts["eta"], float)
+    tf = np.asarray(ts["t_field"], float)
+    truth = np.asarray(ts["field_true"], float).reshape(len(tf), -1)
+    theta = truth @ pinv.T  # (m, n) least-squares node values
+    resid = truth - theta @ Mt.T
+    fillet = Fillet.on_grid(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
+    t_s = cfg.sampling.t_s
+    out = []
+    for j in range(len(tf) - 1):
+        if abs(tf[j + 1] - tf[j] - t_s) > 1e-6:
+            continue
+        i = int(np.searchsorted(t, tf[j] - 1e-9))
+        out.append(theta[j + 1] - model.step(theta[j], u[i], float(eta[i])))
+    return np.asarray(out), resid[:, fillet.mask.ravel()]
+
+
+def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], model_for: Any) -> dict[str, Any]:
+    """``{"q0", "q1", "representation_rms", "samples", "defect_rms"}`` from runs (module docstring);
+    ``model_for(ts)`` gives the estimator's model of a run (its oscillation)."""
+    ds, rs = [], []
+    for ts in runs:
+        d, r = defects(cfg, ts, model_for(ts))
+        ds.append(d)
+        rs.append(r.ravel())
+    d_all = np.concatenate(ds)
+    D = d_all.T @ d_all / len(d_all)
+    fe = model_for(runs[0]).fe
+    q0, q1 = fit_form(D, np.sign(np.asarray(fe.M, float)))
+    return {"q0": q0, "q1": q1, "representation_rms": float(np.sqrt(np.mean(np.concatenate(rs) ** 2))),
+            "samples": len(d_all), "defect_rms": float(np.sqrt(np.mean(d_all**2)))}
+
+
+def replay_metrics(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any) -> tuple[dict[str, Any], float]:
+    """(metrics, largest |replayed - stored estimate| in K over the stored fields) of a stored run whose estimator
+    is replayed with ``cfg`` (its ``[ekf.model_error]``); ``tables`` the twin's model tables of the furnace.
+    Follows the loop's order (update with TC1-3, learning while the reference holds, then predict with the applied
+    powers at eta); a run whose fault detection left a TC out or that changed its reference live is not replayed
+    exactly (the deviation says so)."""
+    from twin.estimation.choice import build_estimator
+    from twin.estimation.uncertainty import FieldUncertainty
+    from twin.runs.metrics import compute_metrics
+
+    sc = Scenario.model_validate_json(str(ts["scenario"]))
+    t, tc, u, eta = (np.asarray(ts[k], float) for k in ("t", "tc", "u", "eta"))
+    est = build_estimator(sc.estimator, tables, sc.oscillation, cfg, float(np.nanmean(tc[0, :3])))
+    me = cfg.ekf.model_error
+    unc = FieldUncertainty(est.model.fe, 0.0 if me is None else me.representation_rms)
+    tf = np.asarray(ts["t_field"], float)
+    shape = np.asarray(ts["field_hat"]).shape
+    sigma, hat, nis = np.zeros(shape), np.zeros(shape), np.zeros(len(t))
+    t_E, k = float(ts["t_E"]), 0
+    for j in range(len(t)):
+        est.update(tc[j, :3], learn=bool(t[j] >= t_E - 1e-9))
+        nis[j] = est.nis
+        if k < len(tf) and abs(tf[k] - t[j]) < 1e-6:
+            sigma[k], hat[k] = unc.field_sigma(est.reported_P), est.model.fe.field_on_cells(est.state.theta)
+            k += 1
+        est.predict(u[j], float(eta[j]))
+    out = dict(ts)
+    out.update(field_sigma=sigma, nis=nis)
+    return compute_metrics(out), float(np.max(np.abs(hat - np.asarray(ts["field_hat"], float))))
