@@ -270,6 +270,14 @@ class OpcUaPlant(_Model):
 Plant = Annotated[SimulatedPlant | OpcUaPlant, Field(discriminator="kind")]
 
 
+class ControlSpec(_Model):
+    """The run's feedback on the feedforward plan (docs/control.md)."""
+
+    feedback: Literal["lqg", "mpc"] | None = Field(
+        None, description="'lqg': the paper's LQG (eqs. 22-29); 'mpc': the constraint-aware MPC on the same "
+        "linearisation; null: the furnace file's [control] feedback")
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: Num = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
@@ -290,6 +298,7 @@ class Scenario(_Model):
         "A simulated plant only: a furnace over OPC UA has no truth and ignores it",
     )
     plant: Plant = Field(default_factory=SimulatedPlant, description="the furnace: simulated, or over OPC UA")
+    control: ControlSpec = Field(default_factory=ControlSpec, description="the run's feedback")
 
     @model_validator(mode="before")
     @classmethod

@@ -99,7 +99,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         plan_cache: dict[Any, _Plan] | None = None,
         budget: PlanBudget | None = None,
     ) -> None:
-        from twin.control.lqg import Controller
+        from twin.control.mpc import make_controller
         from twin.estimation.fault_detection import FaultDetector
         from twin.model.tables import model_tables
         from twin.radiation import radiation_model
@@ -147,7 +147,8 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
-        self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
+        self.feedback = scenario.control.feedback or cfg.control.feedback
+        self.controller = make_controller(self.feedback, self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
         self.detector = FaultDetector(cfg, self._ctl.nominal, n_parameters=self.estimator.k)
