@@ -270,12 +270,23 @@ class OpcUaPlant(_Model):
 Plant = Annotated[SimulatedPlant | OpcUaPlant, Field(discriminator="kind")]
 
 
+class PlanParameters(_Model):
+    """Calibrated deviations of the twin's model (relative, 0.05 = 5 % higher) that the plan uses."""
+
+    lamp_efficiency: Num = Field(0.0, ge=-0.5, le=0.5)
+    emissivity: Num = Field(0.0, ge=-0.5, le=0.5)
+    convection: Num = Field(0.0, ge=-0.5, le=0.5)
+
+
 class ControlSpec(_Model):
-    """The run's feedback on the feedforward plan (docs/control.md)."""
+    """The run's feedback on the feedforward plan, and what the plan's model has learnt (docs/control.md)."""
 
     feedback: Literal["lqg", "mpc"] | None = Field(
         None, description="'lqg': the paper's LQG (eqs. 22-29); 'mpc': the constraint-aware MPC on the same "
         "linearisation; null: the furnace file's [control] feedback")
+    plan_parameters: PlanParameters | None = Field(
+        None, description="the calibrated deviations the plan and the feasibility check use (a server fills them in "
+        "from its furnace's calibration memory); null: the nominal model")
 
 
 class Scenario(_Model):

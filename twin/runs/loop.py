@@ -140,11 +140,14 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self._reference_spec: Reference = scenario.reference
         self._T_range = self._reachable_range()
         self._set_ref_fn(self._make_reference(scenario.reference, T0, t_start=0.0))
-        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes())
+        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes(),
+               scenario.control.model_dump_json())
+        learnt = scenario.control.plan_parameters  # what earlier runs of this furnace learnt (calibration memory)
+        first = Parameters() if learnt is None else Parameters(**learnt.model_dump())
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, first, budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
         self.feedback = scenario.control.feedback or cfg.control.feedback
