@@ -1,6 +1,7 @@
 // furnace-twin dashboard: the entry module.  Reads the server, its furnace and its words, builds the inputs
 // from the furnace's limits, then shows the newest running run.  No build step, no CDN: ES modules from /assets/.
 import { api, forgetOldToken, token } from "./api.js";
+import { refreshCalibration, wireCalibration } from "./calibration.js";
 import { render, startRendering } from "./charts.js";
 import { refreshComparison, startComparing } from "./compare.js";
 import { initEstimatorCharts } from "./estimators.js";
@@ -79,6 +80,7 @@ async function init() {
   }
   wireHelp();
   $("radiation-retry").addEventListener("click", retryRadiation);
+  wireCalibration();
   initEstimatorCharts();
   wireForms();
   initStudies();
@@ -97,6 +99,7 @@ async function init() {
   const first = state.runs.find((r) => going(r)) || state.runs[0]; // the newest running, else newest
   if (first) await selectRun(first.id);
   setInterval(refreshRuns, 4000);
+  setInterval(refreshCalibration, 15000); // a finished run may have taught the twin something
   setInterval(async () => {
     refreshRun();
     try { state.health = await api("GET", "/api/health"); serverLine(); } catch (e) { $("server-state").textContent = "server unreachable"; }

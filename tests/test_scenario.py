@@ -24,6 +24,7 @@ def test_defaults_are_the_product_contract():
         "faults": [],
         "truth": "independent",  # product.md: the furnace file's [truth] by default; "shared" to compare
         "plant": {"kind": "simulated"},  # product.md, "More scenario fields"
+        "control": {"feedback": None, "plan_parameters": None},  # issue 26: [control] feedback, nominal plan
     }
     with pytest.raises(ValidationError, match="truth"):
         Scenario.model_validate({"truth": "model"})

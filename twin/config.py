@@ -373,6 +373,21 @@ class LQGWeights(_Section):
     delta0: float = Field(gt=0)
 
 
+class Control(_Section):
+    """How the twin controls (``[control]``, docs/control.md): the plan's model and reserve, the feedback."""
+
+    feedforward_limit: float = Field(1.0, gt=0.0, le=1.0,
+                                     description="fraction of u_max the feedforward may use (the rest is the "
+                                                 "feedback's reserve)")
+    plan_heat_capacity: Literal["constant", "temperature"] = Field(
+        "constant", description="the plan's model: the paper's constant c_p, or c_p(T) of [material]")
+    feedback: Literal["lqg", "mpc"] = Field("lqg", description="the feedback on the plan: the paper's LQG or MPC")
+    mpc_horizon: float = Field(3.0, gt=0.0, le=60.0, description="MPC prediction horizon (s)")
+    mpc_moves: int = Field(5, ge=1, le=50, description="MPC: free moves over the horizon (the first one sample)")
+    mpc_solver: Literal["osqp", "qpoases"] = Field("osqp", description="MPC: the QP solver (twin/control/qp.py)")
+    mpc_rate: float = Field(1.0, gt=0.0, le=10.0, description="MPC: largest input change per second (u_max/s)")
+
+
 class TruthRadiation(_Section):
     """The simulated furnace's own exchange factors: an independent, mirror-symmetric ray trace."""
 
@@ -444,6 +459,7 @@ class FurnaceConfig(_Section):
     feedforward: FeedforwardWeights
     lqg: LQGWeights
     truth: Truth
+    control: Control = Field(default_factory=Control)
 
     @model_validator(mode="after")
     def _relations(self) -> Self:

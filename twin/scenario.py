@@ -292,6 +292,25 @@ def _speed_schema(schema: dict[str, Any]) -> None:
             option.update(minimum=lim.SPEED.lo, maximum=MAX_SPEED)
 
 
+class PlanParameters(_Model):
+    """Calibrated deviations of the twin's model (relative, 0.05 = 5 % higher) that the plan uses."""
+
+    lamp_efficiency: Num = Field(0.0, ge=-0.5, le=0.5)
+    emissivity: Num = Field(0.0, ge=-0.5, le=0.5)
+    convection: Num = Field(0.0, ge=-0.5, le=0.5)
+
+
+class ControlSpec(_Model):
+    """The run's feedback on the feedforward plan, and what the plan's model has learnt (docs/control.md)."""
+
+    feedback: Literal["lqg", "mpc"] | None = Field(
+        None, description="'lqg': the paper's LQG (eqs. 22-29); 'mpc': the constraint-aware MPC on the same "
+        "linearisation; null: the furnace file's [control] feedback")
+    plan_parameters: PlanParameters | None = Field(
+        None, description="the calibrated deviations the plan and the feasibility check use (a server fills them in "
+        "from its furnace's calibration memory); null: the nominal model")
+
+
 class Scenario(_Model):
     reference: Reference = Field(default_factory=TransitionReference)
     duration: Num = Field(lim.DURATION.default, gt=lim.DURATION.lo, le=lim.DURATION.hi, description="s")
@@ -314,6 +333,7 @@ class Scenario(_Model):
         "A simulated plant only: a furnace over OPC UA has no truth and ignores it",
     )
     plant: Plant = Field(default_factory=SimulatedPlant, description="the furnace: simulated, or over OPC UA")
+    control: ControlSpec = Field(default_factory=ControlSpec, description="the run's feedback")
 
     @model_validator(mode="before")
     @classmethod

@@ -7,6 +7,7 @@ field or the time; feasibility warnings go back to the caller and into the run's
 from __future__ import annotations
 
 import asyncio
+import functools
 from typing import Any
 
 from pydantic import ValidationError
@@ -19,7 +20,7 @@ from backend.runs.worker import LoopFactory
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.limits import ScenarioLimits
-from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, check, parse_faults
+from twin.scenario import FaultSpec, OscillationSpec, PlanParameters, Reference, Scenario, check, parse_faults
 
 
 def refusal(notes: tuple[str, ...]) -> str:
@@ -87,13 +88,17 @@ class RunChecks:
             raise ChangeRejected(say(exc)) from None
 
     async def assess(self, reference: Reference, duration: float, oscillation: OscillationSpec, *,
-                     T_initial: float | None = None, t_start: float = 0.0) -> Any:
+                     T_initial: float | None = None, t_start: float = 0.0,
+                     parameters: PlanParameters | None = None) -> Any:
         """The loop factory's feasibility verdict on a reference (``twin.control.feasibility.Feasibility``),
-        off the event loop; ``None`` if the factory has no such check."""
+        off the event loop, on the model with what the twin has learnt (``parameters``); ``None`` if the
+        factory has no such check."""
         assess = getattr(self.loop_factory, "feasibility", None)
         if not callable(assess):
             return None
-        return await asyncio.to_thread(assess, self.cfg, reference, duration, oscillation, T_initial, t_start)
+        learnt = {} if parameters is None else {"parameters": parameters}
+        return await asyncio.to_thread(functools.partial(assess, self.cfg, reference, duration, oscillation,
+                                                         T_initial, t_start, **learnt))
 
     async def _limits_and_range(self, scenario: Scenario) -> None:
         self.limits_of(scenario)
@@ -115,7 +120,8 @@ class RunChecks:
         """Everything a new run must pass; returns its feasibility warnings (:class:`LimitExceeded` if refused).
         All but :meth:`limits_of` need the radiation model (the run manager defers them during its warm-up)."""
         await self._limits_and_range(scenario)
-        report = await self.assess(scenario.reference, scenario.duration, scenario.oscillation)
+        report = await self.assess(scenario.reference, scenario.duration, scenario.oscillation,
+                                   parameters=scenario.control.plan_parameters)
         notes: tuple[str, ...] = () if report is None else tuple(report.messages)
         if report is not None and report.verdict == "refuse":
             raise LimitExceeded(refusal(notes))
@@ -143,7 +149,8 @@ class RunChecks:
         except LimitExceeded as exc:
             problem = str(exc)
         try:
-            report = await self.assess(scenario.reference, scenario.duration, scenario.oscillation)
+            report = await self.assess(scenario.reference, scenario.duration, scenario.oscillation,
+                                       parameters=scenario.control.plan_parameters)
         except ValueError:  # a reference the trajectory refuses: the limits said why
             report = None
         out: dict[str, Any] = {"verdict": "ok", "messages": [], "worst": None, "first_t": None, "best": None,

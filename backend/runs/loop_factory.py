@@ -21,7 +21,7 @@ from backend.core.settings import Settings
 from backend.runs.worker import LoopLike
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import OscillationSpec, PlanParameters, Reference, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ class DefaultLoopFactory:
         self._radiation: dict[str, Any] = {}
         self._truth_radiation: dict[str, Any] = {}
         self._T_range: dict[str, tuple[float, float]] = {}
-        self._models: dict[tuple[str, str], tuple[Any, tuple[float, float]]] = {}  # (model, hold range)
+        self._models: dict[tuple[str, str, str | None], tuple[Any, tuple[float, float]]] = {}  # (model, hold range)
         self._status: dict[str, WarmUpStatus] = {}
         self._ready: dict[str, threading.Event] = {}
         self._status_lock = threading.Lock()
@@ -223,18 +223,24 @@ class DefaultLoopFactory:
 
         reference_trajectory(reference, float(cfg.specimen.initial_temperature), T_range=T_range)
 
-    def model(self, cfg: FurnaceConfig, oscillation: OscillationSpec | None) -> tuple[Any, tuple[float, float]]:
-        """The twin's discrete model for ``oscillation`` (time-averaged if enabled, eq. 11) and its hold range
-        (``twin.control.feasibility.hold_range``), cached per furnace and oscillation."""
+    def model(self, cfg: FurnaceConfig, oscillation: OscillationSpec | None,
+              parameters: PlanParameters | None = None) -> tuple[Any, tuple[float, float]]:
+        """The model the twin plans with for ``oscillation`` (time-averaged if enabled, eq. 11; with the
+        learnt ``parameters`` and c_p(T) if ``[control]`` says so) and its hold range
+        (``twin.control.feasibility.hold_range``), cached per furnace, oscillation and parameters."""
         from twin.control.feasibility import hold_range
+        from twin.control.plan_model import plan_model
         from twin.model.discrete import discrete_model
+        from twin.model.tables import Parameters
 
         osc = oscillation if oscillation is not None and oscillation.enabled else None
-        key = (cfg.digest(), "fixed" if osc is None else osc.model_dump_json())
+        key = (cfg.digest(), "fixed" if osc is None else osc.model_dump_json(),
+               None if parameters is None else parameters.model_dump_json())
         with self._lock:
             known = self._models.get(key)
         if known is None:
-            model = discrete_model(cfg, self.radiation(cfg), osc)
+            learnt = None if parameters is None else Parameters(**parameters.model_dump())
+            model = plan_model(discrete_model(cfg, self.radiation(cfg), osc, parameters=learnt), cfg)
             known = (model, hold_range(model, cfg))
             with self._lock:
                 self._models[key] = known
@@ -244,14 +250,15 @@ class DefaultLoopFactory:
 
     def feasibility(self, cfg: FurnaceConfig, reference: Reference, duration: float,
                     oscillation: OscillationSpec | None = None, T_initial: float | None = None,
-                    t_start: float = 0.0) -> Any:
+                    t_start: float = 0.0, parameters: PlanParameters | None = None) -> Any:
         """Can the furnace follow ``reference`` (``twin.control.feasibility.check_transition``) over a run of
-        ``duration`` s from ``t_start`` (a live change: from now at the current mean ``T_initial``)?
+        ``duration`` s from ``t_start`` (a live change: from now at the current mean ``T_initial``), on the
+        model the run plans with (``parameters``: what earlier runs learnt) and within the plan's reserve?
         ``None`` if the model cannot be built (the run's own build then reports the problem)."""
         from twin.control.feasibility import check_transition
 
         try:
-            model, hold = self.model(cfg, oscillation)
+            model, hold = self.model(cfg, oscillation, parameters)
         except Exception:
             log.exception("cannot build the model for the feasibility check; the reference is not checked")
             return None

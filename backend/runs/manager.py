@@ -129,7 +129,9 @@ class RunManager(RunDriver):
         """Register and launch a run at once.  While the radiation models warm up the run waits as ``queued``:
         only the limits (and the furnace it names) are checked now, its reference (reachable, feasible, a plan
         within this server's time and memory) when the models are ready, and a refusal then ends it in
-        ``error``; afterwards all of it is a :class:`LimitExceeded` here."""
+        ``error``; afterwards all of it is a :class:`LimitExceeded` here.  The plan starts from what earlier
+        runs of this furnace learnt (:mod:`twin.control.calibration_memory`) unless the scenario says."""
+        scenario = self.with_memory(scenario)
         checked = self.model_ready()
         if checked:
             notes = await self.checks.start(scenario)
@@ -167,6 +169,12 @@ class RunManager(RunDriver):
         run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
         return Started(run_id, notes)
+
+    def with_memory(self, scenario: Scenario) -> Scenario:
+        """The scenario with the furnace's learnt parameters for its plan (``control.plan_parameters``)."""
+        from twin.control.calibration_memory import with_memory
+
+        return with_memory(scenario, self.settings.data_dir, self.cfg)
 
     def _check_plant_free(self, scenario: Scenario) -> None:
         """:class:`PlantBusy` if another run of this server drives the scenario's furnace over OPC UA."""

@@ -309,6 +309,19 @@ class RunWorker(RunChanges):
                 log.exception("run %s: its ending failed", self.run_id)
         return run_ending(status, error, None, t_end)
 
+    def _remember(self, metrics: dict[str, Any]) -> None:
+        """A finished run's calibration goes to the furnace's memory (twin.control.calibration_memory)."""
+        calibration = metrics.get("calibration")
+        if not isinstance(calibration, dict) or metrics.get("status") != "finished":
+            return
+        from twin.control.calibration_memory import CalibrationMemory
+
+        try:
+            memory = CalibrationMemory.of(self.settings.data_dir, self.cfg, self.scenario)
+            memory.learn(self.run_id, calibration, self.cfg)
+        except OSError:
+            log.exception("run %s: the calibration memory could not be written", self.run_id)
+
     def finalize(self, status: str | None = None, error: str | None = None) -> dict[str, Any] | None:
         """The run's end as an event (``status``: finished, stopped, ...), the last flush; metrics of the run so
         far (``None`` entries where a window was not reached) with ``status`` and ``status_reason``
@@ -330,6 +343,7 @@ class RunWorker(RunChanges):
             if self.ending is not None:
                 metrics.update(status=self.ending[0], status_reason=self.ending[1])
             write_json_atomic(self.files.metrics, metrics)
+            self._remember(metrics)
         try:
             self.flush(metrics)
             consolidate(self.files.folder, self.files.timeseries, load=False)  # timeseries.npz of product.md

@@ -54,3 +54,16 @@ def test_finding_09_the_page_asks_before_it_starts(client) -> None:
     assert client.post("/api/feasibility", json={}).json()["verdict"] == "ok"  # the paper's run
     invalid = client.post("/api/feasibility", json={"duration": 1e6})  # an invalid scenario: the start's 422
     assert invalid.status_code == 422 and invalid.json()["detail"][0]["loc"][-1] == "duration"
+
+
+def test_the_check_uses_what_the_twin_has_learnt(client) -> None:
+    """Issue 26: POST /api/feasibility on the model with the scenario's learnt parameters (a server fills them in
+    from its calibration memory): lamps learnt 50 % weaker hold 1187 K instead of 1430 K (small furnace), and
+    1250 K is refused with that bound named."""
+    body = {"reference": {"setpoint": 1250.0, "t_E": 120.0}}
+    nominal = client.post("/api/feasibility", json=body).json()
+    weak = client.post("/api/feasibility", json={**body, "control": {"plan_parameters": {"lamp_efficiency": -0.5}}})
+    weak_json = weak.json()
+    assert nominal["verdict"] != "refuse" and nominal["hold_range"][1] > 1400.0
+    assert weak_json["hold_range"][1] < 1200.0 and weak_json["verdict"] == "refuse"
+    assert f"{weak_json['hold_range'][1]:.0f} K" in " ".join(weak_json["messages"])

@@ -139,3 +139,34 @@ def test_shortest_transition_is_the_edge_of_feasibility(setup) -> None:
 
     assert gap(t_E) <= WARN_K < gap(0.9 * t_E)  # followed at t_E, not 10 % faster (bisection to 5 %)
     assert shortest_transition(model, cfg, 2000.0, 300.0, hold) is None  # above what full power holds
+
+
+def test_the_plans_reserve_is_named(setup) -> None:
+    """A transition the lamps follow at full power but not within the plan's share (``feedforward_limit``):
+    the check says the feedback will spend its reserve, and when.  Within the share: no such sentence."""
+    cfg, model, hold = setup
+    shortest = shortest_transition(model, cfg, 1100.0, 300.0, hold)
+    assert shortest is not None
+    spec = TransitionReference(setpoint=1100.0, t_E=1.3 * shortest)
+    assert check_transition(model, cfg, spec, duration=3 * spec.t_E, hold=hold, limit=1.0).verdict == "ok"
+    capped = check_transition(model, cfg, spec, duration=3 * spec.t_E, hold=hold, limit=0.6)
+    assert capped.verdict == "warn" and any("reserve" in m and "60%" in m for m in capped.messages)
+    assert check_transition(model, cfg, TransitionReference(setpoint=1100.0, t_E=120.0), duration=240.0,
+                            hold=hold, limit=0.85).verdict == "ok"  # the paper's run leaves the reserve alone
+
+
+def test_learnt_parameters_move_the_verdict(setup, small_radiation) -> None:
+    """On the model with lamps learnt 50 % weaker (small furnace: full-power hold 1430 K -> 1187 K), 1250 K is out
+    of reach, and the reachable trajectory (``T_best``) ends below it."""
+    from twin.model.tables import Parameters
+
+    cfg, model, hold = setup
+    weak = discrete_model(cfg, small_radiation, None, parameters=Parameters(lamp_efficiency=-0.5))
+    weak_hold = hold_range(weak, cfg)
+    setpoint = 1250.0
+    assert weak_hold[1] < setpoint - 50.0 < hold[1] - 100.0
+    spec = TransitionReference(setpoint=setpoint, t_E=300.0)
+    assert check_transition(model, cfg, spec, duration=600.0, hold=hold, T_initial=900.0).verdict == "ok"
+    f = check_transition(weak, cfg, spec, duration=600.0, hold=weak_hold, T_initial=900.0)
+    assert f.verdict in ("warn", "refuse") and f.T_best[-1] < setpoint - 10.0
+    assert f"{weak_hold[1]:.0f} K" in " ".join(f.messages)

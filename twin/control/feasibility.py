@@ -131,17 +131,16 @@ def hold_range(model: DiscreteDynamics, cfg: FurnaceConfig) -> tuple[float, floa
 
 
 def best_tracking(model: DiscreteDynamics, ref: ReferenceTrajectory, theta0: Array, t0: float,
-                  n_steps: int) -> tuple[Array, Array]:
-    """The fillet mean that follows ``ref`` as closely as uniform group powers in [0, 1] allow.
+                  n_steps: int, s_max: float = 1.0) -> tuple[Array, Array]:
+    """The fillet mean that follows ``ref`` as closely as uniform group powers in [0, s_max] allow.
 
     Returns the run times t0 .. t0 + n_steps t_s and the mean there (K).  Per sample, with
-    F(theta, u) = F(theta, 0) + t_s B u (eq. 12a, affine in u) and u = s 1:
-    s = clip((T_ref(t + t_s) - c_m^T F(theta, 0)) / (c_m^T t_s B 1), 0, 1).
+    F(theta, u) = F(theta, 0) + t_s B(theta) u (eq. 12a, affine in u) and u = s 1:
+    s = clip((T_ref(t + t_s) - c_m^T F(theta, 0)) / (c_m^T t_s B(theta) 1), 0, s_max).
+    (B depends on theta only in a model with c_p(T), :class:`twin.control.plan_model.CapacityModel`.)
     """
     t_s = float(model.t_s)
     ones = np.ones(model.m)
-    gain_vec = np.asarray(model.jac_u(theta0, ones), float) @ ones  # t_s B 1: K per unit s, per node
-    gain = float(model.c_m @ gain_vec)
     t: Array = t0 + t_s * np.arange(n_steps + 1, dtype=float)
     target = np.asarray(ref(t), float)
     theta = np.asarray(theta0, float).copy()
@@ -149,8 +148,10 @@ def best_tracking(model: DiscreteDynamics, ref: ReferenceTrajectory, theta0: Arr
     mean[0] = float(model.c_m @ theta)
     zero = np.zeros(model.m)
     for j in range(n_steps):
+        gain_vec = np.asarray(model.jac_u(theta, ones), float) @ ones  # t_s B 1: K per unit s, per node
+        gain = float(model.c_m @ gain_vec)
         free = np.asarray(model.step(theta, zero), float)
-        s = min(max((target[j + 1] - float(model.c_m @ free)) / gain, 0.0), 1.0) if gain > 0 else 1.0
+        s = min(max((target[j + 1] - float(model.c_m @ free)) / gain, 0.0), s_max) if gain > 0 else s_max
         theta = free + s * gain_vec
         mean[j + 1] = float(model.c_m @ theta)
     return t, mean
@@ -235,18 +236,42 @@ def shortest_transition(model: DiscreteDynamics, cfg: FurnaceConfig, setpoint: f
     return top
 
 
+def reserve_note(model: DiscreteDynamics, ref: ReferenceTrajectory, T_initial: float, t_start: float,
+                 t_end: float, limit: float, full: Feasibility) -> str | None:
+    """A sentence when the reference needs more than the feedforward's share ``limit`` of u_max
+    (``[control] feedforward_limit``) although the furnace can follow it at full power: then the feedback
+    spends its reserve on the plan, and has less for the furnace's surprises."""
+    if limit >= 1.0 or full.verdict == "refuse":
+        return None
+    n = max(int(math.ceil((t_end - t_start) / model.t_s - 1e-9)), 1)
+    t, capped = best_tracking(model, ref, np.full(model.n, float(T_initial)), t_start, n, s_max=limit)
+    gap = np.asarray(ref(t), float) - capped
+    extra = gap - (np.asarray(ref(t), float) - full.T_best) if full.T_best.size == gap.size else gap
+    k = int(np.argmax(extra))
+    if extra[k] <= WARN_K:
+        return None
+    return (f"the plan may use {limit:.0%} of each group's power (the rest is the feedback's reserve): with that "
+            f"the fillet mean would fall {gap[k]:.0f} K behind at t = {t[k]:.1f} s, so the feedback spends its "
+            "reserve on the plan there")
+
+
 def check_transition(model: DiscreteDynamics, cfg: FurnaceConfig, spec: Reference, *, duration: float,
                      T_initial: float | None = None, t_start: float = 0.0,
-                     hold: tuple[float, float] | None = None) -> Feasibility:
+                     hold: tuple[float, float] | None = None, limit: float | None = None) -> Feasibility:
     """:func:`check_reference` of a scenario's reference (transition or points) over a run of ``duration`` s
     from ``t_start`` (a live change: from now, with the current mean as ``T_initial``); adds what a
-    user can change: the shortest feasible t_E of a transition, points after the end of the run."""
+    user can change: the shortest feasible t_E of a transition, points after the end of the run, and (``limit``,
+    default ``[control] feedforward_limit``) where the plan would need the feedback's reserve."""
     T0 = float(cfg.specimen.initial_temperature) if T_initial is None else float(T_initial)
     hold = hold_range(model, cfg) if hold is None else hold
     ref = reference_trajectory(spec, T0, t_start=t_start)
     t_end = max(duration, t_start + model.t_s)
     out = check_reference(model, cfg, ref, T_initial=T0, t_start=t_start, t_end=t_end, hold=hold)
     extra: list[str] = []
+    note = reserve_note(model, ref, T0, t_start, t_end,
+                        float(cfg.control.feedforward_limit if limit is None else limit), out)
+    if note is not None:
+        extra.append(note)
     if isinstance(spec, TransitionReference) and out.verdict != "ok":
         shortest = shortest_transition(model, cfg, spec.setpoint, T0, hold)
         if shortest is not None and shortest > spec.t_E:

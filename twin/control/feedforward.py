@@ -38,6 +38,9 @@ over the horizon beta t_E.  Choices made to keep it small, smooth and fast:
   the upper one is replaced in the OCP by the smooth minimum
   ``(z + 1 - sqrt((z - 1)^2 + w^2)) / 2``, width w = ``cfg.feedforward.smoothing``
   (at most w/2 below min(z, 1)).
+* **Reserve.**  With ``[control] feedforward_limit`` = s < 1 the OCP plans u' on the model
+  F(theta, s u') (:class:`twin.control.plan_model.ScaledInputs`) and the plan is u_ff = s u':
+  the feedforward never uses more than s u_max, the feedback keeps the rest.
 * **Unparametrized OCP** (``parametrized=False``, Remark 4): free inputs held over the
   same intervals, 0 <= u <= 1; comparing the objectives shows what (18) trades away.
 
@@ -74,6 +77,7 @@ from twin.control.initial_guess import V_MAX, KnotGrid, free_guess, heating_effi
 from twin.control.ipopt_callbacks import casadi_objective
 from twin.control.ocp_grid import DEFAULT_INTERVAL_S, RefFn, check_budget, plan_grid
 from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
+from twin.control.plan_model import ScaledInputs
 from twin.control.shooting import CoarseShooting, FreeInputs, ScaledDistribution
 from twin.model.dynamics import DiscreteDynamics
 
@@ -205,6 +209,9 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     th0 = np.asarray(theta0, float)
     if th0.shape != (model.n,) or not np.all(np.isfinite(th0)):
         raise ValueError(f"theta0 must be a finite vector of {model.n} temperatures")
+    # the reserve: the OCP plans u' in [0, 1] on F(theta, limit u'); the plan applies limit u' (plan_model.py)
+    limit = float(cfg.control.feedforward_limit)
+    real_model, model = model, (model if limit >= 1.0 else ScaledInputs(model, limit))
     pg = plan_grid(model, T_ref_fn, t0, cfg, horizon=horizon, t_stop=t_stop, interval=interval, theta0=th0)
     if budget is not None:
         budget.check("the feedforward plan")
@@ -283,7 +290,8 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
         Uk_opt = np.clip(xopt.reshape(grid.K, m), 0.0, 1.0)
         u_ff = np.repeat(Uk_opt, substeps, axis=0)
         warm.update(U=Uk_opt)
-    theta_ref = simulate(model, th0, u_ff)
+    u_ff = limit * u_ff if limit < 1.0 else u_ff
+    theta_ref = simulate(real_model, th0, u_ff)
     T_ref = np.asarray(T_ref_fn(t_fine), float)
     T_mean = theta_ref @ np.asarray(model.c_m, float)
     e = T_mean[1:] - T_ref[1:]

@@ -165,10 +165,35 @@ class Gains:
     P_terminal: Array
     jacobian_every: int = 1
     design_s: float = 0.0
+    Phi: Array | None = None
+    Gamma: Array | None = None
+    P: Array | None = None
+    Phi_terminal: Array | None = None
+    Gamma_terminal: Array | None = None
 
     def at(self, j: int) -> Array:
         """K_j, or the terminal gain beyond the horizon."""
         return self.K[j] if 0 <= j < self.K.shape[0] else self.K_terminal
+
+    def linearisation(self, j: int) -> tuple[Array, Array]:
+        """(Phi_j, Gamma_j) of eq. (23) as the design used them (held over ``jacobian_every`` samples; the
+        terminal ones beyond the plan)."""
+        if self.Phi is None or self.Gamma is None or self.Phi_terminal is None or self.Gamma_terminal is None:
+            raise ValueError("these gains were made without their linearisation")
+        if 0 <= j < self.K.shape[0]:
+            i = j // self.jacobian_every
+            return self.Phi[i], self.Gamma[i]
+        return self.Phi_terminal, self.Gamma_terminal
+
+    def cost_to_go(self, j: int) -> Array:
+        """P_j of the recursion (29) at a multiple j of ``jacobian_every`` (P_S at and beyond the plan's end)."""
+        if self.P is None:
+            raise ValueError("these gains were made without their cost-to-go")
+        if j >= self.K.shape[0]:
+            return self.P_terminal
+        if j % self.jacobian_every:
+            raise ValueError(f"P_j is kept at multiples of {self.jacobian_every} samples only, not at {j}")
+        return self.P[j // self.jacobian_every]
 
 
 #: samples of the Riccati recursion between two budget checks (a few ms)
@@ -225,6 +250,8 @@ def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfi
     P_S = P
 
     K = np.empty((N, m, n + 1))
+    n_held = (N - 1) // every + 1
+    Phis, Gams, Ps = np.empty((n_held, n, n)), np.empty((n_held, n, m)), np.empty((n_held, n + 1, n + 1))
     key: tuple[int, float] | None = None
     Pt = Gt = np.empty(0)
     for j in range(N - 1, -1, -1):
@@ -235,15 +262,18 @@ def _lqg_gains(model: DiscreteDynamics, plan: FeedforwardPlan, cfg: FurnaceConfi
         if key is None or key[0] != jj:
             Phi = np.asarray(model.jac_theta(plan.theta_ref[jj], plan.u_ff[jj]), float)
             Gam = np.asarray(model.jac_u(plan.theta_ref[jj], plan.u_ff[jj]), float)
+            Phis[jj // every], Gams[jj // every] = Phi, Gam
             Pt, Gt = augmented_system(Phi, Gam, c_m, t_s, delta)
         elif key[1] != delta:
             Pt = Pt.copy()
             Pt[n, :n] = delta * t_s * c_m
         key = (jj, delta)
         P, K[j] = riccati_step(P, Pt, Gt, Q, w.r0)
+        if j == jj:
+            Ps[j // every] = P  # the cost-to-go P_j: the MPC's terminal cost (twin.control.mpc)
     elapsed = time.perf_counter() - t_start
     log.info("LQG gains for %d samples (Jacobians every %d) in %.2f s", N, every, elapsed)
-    return Gains(K, K_term, P_S, every, elapsed)
+    return Gains(K, K_term, P_S, every, elapsed, Phis, Gams, Ps, Phi_N, Gam_N)
 
 
 @dataclass

@@ -104,14 +104,16 @@ class LiveChanges:
     ) -> _Plan:
         """Model (averaged over the motion, eq. 11, with the calibrated parameters), feedforward and gains
         for the rest of the run from t0 (eqs. 18-29)."""
+        from twin.control.plan_model import plan_model
         from twin.control.replan import replan
         from twin.model.discrete import discrete_model
 
         nominal = discrete_model(self.cfg, self.radiation, spec if spec.enabled else None, tables=self.tables,
                                  parameters=parameters)
         gains_now = self._lamp_gains.copy()
-        model = faulty_model(nominal, gains_now)  # the groups as the fault detection believes them
-        faulty = model is not nominal
+        believed = faulty_model(nominal, gains_now)  # the groups as the fault detection believes them
+        faulty = believed is not nominal
+        model = plan_model(believed, self.cfg)  # with c_p(T) if [control] says so
         plan, gains = replan(model, self.cfg, theta, t0, ref_fn, previous, t_stop=self.scenario.duration,
                              budget=budget, best_effort=faulty)
         log.info(

@@ -101,7 +101,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         plan_cache: dict[Any, _Plan] | None = None,
         budget: PlanBudget | None = None,
     ) -> None:
-        from twin.control.lqg import Controller
+        from twin.control.mpc import make_controller
         from twin.estimation.fault_detection import FaultDetector
         from twin.model.tables import model_tables
         from twin.radiation import radiation_model
@@ -142,14 +142,18 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self._reference_spec: Reference = scenario.reference
         self._T_range = self._reachable_range()
         self._set_ref_fn(self._make_reference(scenario.reference, T0, t_start=0.0))
-        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes())
+        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes(),
+               scenario.control.model_dump_json())
+        learnt = scenario.control.plan_parameters  # what earlier runs of this furnace learnt (calibration memory)
+        first = Parameters() if learnt is None else Parameters(**learnt.model_dump())
         if plan_cache is not None and key in plan_cache:
             self._ctl = plan_cache[key]
         else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, Parameters(), budget=budget)
+            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, first, budget=budget)
             if plan_cache is not None:
                 plan_cache[key] = self._ctl
-        self.controller = Controller(self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
+        self.feedback = scenario.control.feedback or cfg.control.feedback
+        self.controller = make_controller(self.feedback, self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
         self.detector = FaultDetector(cfg, self._ctl.nominal, n_parameters=self.estimator.k)

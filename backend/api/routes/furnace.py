@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from backend.api.deps import ManagerDep, ScenarioBody
+from backend.api.deps import ManagerDep, ScenarioBody, TokenDep
 from backend.api.schemas import FurnaceOut, LampGroupOut
 from twin.physics.fillet import fillet_box
 from twin.physics.grid import cell_centers
@@ -46,4 +46,30 @@ async def feasibility(manager: ManagerDep, scenario: ScenarioBody) -> dict[str, 
     behind), ``refuse`` (a 422 on start) or ``pending`` (the radiation model is still loading: only the limits
     were checked, a run would wait as ``queued``); ``best``: the closest fillet mean the furnace can reach
     (``t``, ``T``); ``hold_range``: the means it can hold (lamps off, full power) in K.  Nothing is started."""
-    return await manager.checks.preview(scenario)
+    return await manager.checks.preview(manager.with_memory(scenario))
+
+
+def _calibration(manager: Any) -> dict[str, Any]:
+    from twin.control.calibration_memory import memories
+
+    return {"furnace": manager.limits.furnace,
+            "plants": [m.load() for m in memories(manager.settings.data_dir, manager.cfg)]}
+
+
+@router.get("/furnace/calibration")
+def calibration(manager: ManagerDep) -> dict[str, Any]:
+    """What the twin has learnt about this furnace from earlier runs, per plant it ran on (simulated with its
+    truth and mismatch, or an OPC UA endpoint): each parameter's relative deviation ``value``, ``sigma``,
+    ``when`` and the ``runs`` it came from.  The next run's plan and its feasibility check start from these
+    (docs/control.md)."""
+    return _calibration(manager)
+
+
+@router.delete("/furnace/calibration", dependencies=[TokenDep])
+def reset_calibration(manager: ManagerDep) -> dict[str, Any]:
+    """Forget what the twin has learnt about this furnace: the next run plans with the nominal model."""
+    from twin.control.calibration_memory import memories
+
+    for m in memories(manager.settings.data_dir, manager.cfg):
+        m.reset()
+    return _calibration(manager)

@@ -1,0 +1,226 @@
+"""The MPC feedback (twin.control.mpc) on a small linear time-varying system: the LQG when no bound is active,
+scipy's solution of the same constrained problem written out step by step, bounds and rates never violated,
+and a saturated group's share taken over by the others."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.optimize
+from controller_standin import make_standin
+
+from twin.config import small_config
+from twin.control.lqg import IntegratorState, anti_windup_delta, augmented_system, lqg_gains, weight_matrix
+from twin.control.mpc import MPCController, MPCSettings, condensed_qp, horizon_end, move_blocks
+from twin.control.plan import FeedforwardPlan, simulate
+from twin.control.qp import make_solver
+from twin.control.reference import steady_state
+
+EVERY = 5  # the design's Jacobian hold in these tests (the loop uses 10)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return small_config()
+
+
+@pytest.fixture(scope="module")
+def standin():
+    return make_standin(nx=4, ny=3, m=3)
+
+
+def _plan(model, u_ff):
+    """A plan along the inputs u_ff (N, m) from the steady state of u_ff[0]: time-varying linearisation."""
+    theta0 = steady_state(model, u_ff[0], np.full(model.n, 900.0))
+    theta = simulate(model, theta0, u_ff)
+    T = theta @ model.c_m
+    t = np.arange(len(u_ff) + 1) * model.t_s
+    return FeedforwardPlan(t=t, u_ff=u_ff, theta_ref=theta, T_ref=T, T_mean=T, status="test", iterations=0,
+                           solve_s=0.0, success=True)
+
+
+@pytest.fixture(scope="module")
+def ramp(standin, cfg):
+    """u_ff from 0.3 to 0.6 over 200 samples: interior, so no bound is active for small deviations."""
+    u_ff = np.linspace(0.3, 0.6, 200)[:, None] * np.ones(standin.m)
+    plan = _plan(standin, u_ff)
+    return plan, lqg_gains(standin, plan, cfg, jacobian_every=EVERY)
+
+
+@pytest.fixture(scope="module")
+def high(standin, cfg):
+    """Group 0 at full power in the plan, the others at 0.5."""
+    u = np.array([1.0, 0.5, 0.5])
+    plan = _plan(standin, np.tile(u, (200, 1)))
+    return plan, lqg_gains(standin, plan, cfg, jacobian_every=EVERY)
+
+
+def _e0(model, scale, e_I=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.append(scale * (1.0 + 0.3 * rng.normal(size=model.n)), e_I)
+
+
+def test_move_blocks_and_horizon_end():
+    assert move_blocks(30, 5) == [1, 8, 7, 7, 7] and sum(move_blocks(23, 4)) == 23
+    assert move_blocks(4, 10) == [1, 1, 1, 1] and move_blocks(7, 1) == [7]
+    # ends at a multiple of the hold (where the design kept P_j), never at j itself; j + H past the plan
+    assert horizon_end(12, 30, 10, 500) == 40 and horizon_end(19, 3, 10, 500) == 20
+    assert horizon_end(480, 30, 10, 500) == 510
+
+
+def test_without_active_bounds_the_first_move_is_the_lqg(standin, cfg, ramp):
+    """One move per sample, no bound active: the QP's minimiser is the LQ solution, whose first move is
+    K_j e_j of the Riccati recursion (29) (the terminal cost is the recursion's own P at the horizon's end)."""
+    plan, gains = ramp
+    w = cfg.lqg
+    settings = MPCSettings(horizon=30, moves=30, rate=10.0)
+    solver = make_solver("osqp")
+    for j, scale in ((37, 0.5), (3, -0.8), (190, 0.3)):  # 190: the horizon runs past the plan (P_S)
+        e0 = _e0(standin, scale, e_I=0.2, seed=j)
+        pred = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, None, settings)
+        lqg = gains.at(j) @ e0
+        assert np.all(np.abs(lqg) < 0.25), "the test needs a deviation small enough to stay inside the bounds"
+        res = solver.solve(pred.qp)
+        assert res.ok, res.status
+        np.testing.assert_allclose(res.z[: standin.m], lqg, rtol=1e-4, atol=1e-6 * np.abs(lqg).max())
+
+
+def test_controller_uses_the_deviation_from_the_plan(standin, cfg, ramp):
+    """MPCController.control: e = [theta_hat - theta_ref,j ; e_I] (eq. 24); u = u_ff + the first move."""
+    plan, gains = ramp
+    ctl = MPCController(standin, plan, gains, cfg, IntegratorState(0.3),
+                        settings=MPCSettings(horizon=30, moves=30, rate=10.0))
+    j = 60
+    dev = 0.4 * np.cos(np.arange(standin.n))
+    u, u_ff, du = ctl.control(j, plan.theta_ref[j] + dev)
+    expected = gains.at(j) @ np.append(dev, 0.3)
+    np.testing.assert_allclose(du, expected, rtol=1e-4, atol=1e-8)
+    np.testing.assert_allclose(u, plan.u_ff[j] + expected, rtol=1e-4)
+    # the integral state integrates the mean error against T_ref (eq. 22)
+    mean_err = float(standin.c_m @ (plan.theta_ref[j] + dev)) - plan.T_ref[j]
+    assert ctl.state.e_I == pytest.approx(0.3 + plan.t_s * mean_err)
+
+
+def _explicit_cost(z, gains, plan, model, cfg, j, e0, blocks):
+    """The MPC's cost written out: the augmented system (24) stepped sample by sample with held moves."""
+    w = cfg.lqg
+    Q = weight_matrix(model.c_m, w.q0, w.q1)
+    m = model.m
+    x = e0.copy()
+    cost = 0.0
+    k = 0
+    for b, length in enumerate(blocks):
+        du = z[b * m:(b + 1) * m]
+        for _ in range(length):
+            Phi, Gam = gains.linearisation(j + k)
+            delta = anti_windup_delta(plan.sample(j + k)[0], w.delta0)
+            Pt, Gt = augmented_system(Phi, Gam, model.c_m, model.t_s, delta)
+            cost += x @ Q @ x + w.r0 * du @ du
+            x = Pt @ x + Gt @ du
+            k += 1
+    return cost + x @ gains.cost_to_go(j + k) @ x
+
+
+def test_constrained_qp_matches_scipy(standin, cfg, high):
+    """Group 0 planned at full power, the plate 15 K too cold: the bounds are active.  The condensed QP
+    solved by OSQP against scipy's SLSQP on the explicit problem (bounds 0 <= u_ff + du <= 1 per move,
+    rate bounds between the moves)."""
+    plan, gains = high
+    j, m = 20, standin.m
+    settings = MPCSettings(horizon=20, moves=4, rate=0.05)
+    e0 = _e0(standin, -15.0, e_I=-5.0)
+    w = cfg.lqg
+    u_prev = plan.u_ff[j]
+    pred = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, u_prev, settings)
+    res = make_solver("osqp").solve(pred.qp)
+    assert res.ok
+    blocks = pred.blocks
+    H = sum(blocks)
+    nz = m * len(blocks)
+    u_ff = np.array([plan.sample(j + k)[0] for k in range(H)])
+    starts = np.cumsum([0, *blocks[:-1]])
+    bounds = []
+    for b, (k0, length) in enumerate(zip(starts, blocks, strict=True)):
+        for i in range(m):
+            seg = u_ff[k0:k0 + length, i]
+            lo, hi = float(np.max(-seg)), float(np.min(1.0 - seg))
+            if b == 0:
+                lo, hi = max(lo, u_prev[i] - 0.05 - u_ff[0, i]), min(hi, u_prev[i] + 0.05 - u_ff[0, i])
+            bounds.append((lo, hi))
+
+    def rate(z):  # >= 0: |u at the start of move b - u at the end of move b - 1| <= rate
+        out = []
+        for b in range(1, len(blocks)):
+            jump = (u_ff[starts[b]] + z[b * m:(b + 1) * m]) - (u_ff[starts[b] - 1] + z[(b - 1) * m:b * m])
+            out.extend(0.05 - jump)
+            out.extend(0.05 + jump)
+        return np.array(out)
+
+    scale = 1e-3  # SLSQP on a cost of ~1e5 K^2
+    ref = scipy.optimize.minimize(lambda z: scale * _explicit_cost(z, gains, plan, standin, cfg, j, e0, blocks),
+                                  np.zeros(nz), method="SLSQP", bounds=bounds,
+                                  constraints=[{"type": "ineq", "fun": rate}],
+                                  options={"ftol": 1e-12, "maxiter": 500})
+    assert ref.success, ref.message
+    assert res.z[0] == pytest.approx(0.0, abs=1e-6)  # group 0 is at its upper bound
+    assert np.any(np.abs(res.z[1:m]) > 0.01)  # the others move
+    np.testing.assert_allclose(res.z, ref.x, atol=2e-4)
+    assert _explicit_cost(res.z, gains, plan, standin, cfg, j, e0, blocks) <= \
+        _explicit_cost(ref.x, gains, plan, standin, cfg, j, e0, blocks) * (1 + 1e-6)
+
+
+def test_a_saturated_group_is_taken_over_by_the_others(standin, cfg, high):
+    """Too cold with group 0 at full power: the LQG clips group 0's correction and loses it; the MPC puts
+    more on the groups that still have room, and the predicted mean error shrinks faster."""
+    plan, gains = high
+    j = 40
+    theta_hat = plan.theta_ref[j] - 20.0
+    lqg_u = np.clip(plan.u_ff[j] + gains.at(j) @ np.append(theta_hat - plan.theta_ref[j], 0.0), 0.0, 1.0)
+    ctl = MPCController(standin, plan, gains, cfg, settings=MPCSettings(horizon=30, moves=5, rate=1.0))
+    u, _, _ = ctl.control(j, theta_hat)
+    assert lqg_u[0] == 1.0 and u[0] == pytest.approx(1.0, abs=1e-6)
+    assert np.all(u[1:] > lqg_u[1:] + 1e-3)  # (the paper's r0 = 1e4 makes every move cautious)
+
+    def mean_after(u_applied, steps=10):
+        th = theta_hat.copy()
+        for _ in range(steps):
+            th = standin.step(th, u_applied)
+        return float(standin.c_m @ th)
+
+    assert mean_after(u) > mean_after(lqg_u) + 0.1  # K warmer after 1 s (0.20 K when written)
+
+
+def test_bounds_and_rates_hold_in_closed_loop(cfg, high):
+    """The plant's lamps 25 % weaker than the model's: the feedback runs into its bounds.  Every move the QP
+    returns keeps 0 <= u_ff + du <= 1 (before any clipping) and |u_j - u_j-1| <= rate t_s."""
+    plan, gains = high
+    plant = make_standin(nx=4, ny=3, m=3, gain_scale=0.75)
+    model = make_standin(nx=4, ny=3, m=3)
+    settings = MPCSettings(horizon=20, moves=4, rate=0.02)
+    ctl = MPCController(model, plan, gains, cfg, settings=settings)
+    theta = plan.theta_ref[0] - 30.0
+    u_prev = None
+    for j in range(120):
+        u, u_ff, du = ctl.control(j, theta)
+        raw = u_ff + du
+        assert np.all(raw >= -1e-7) and np.all(raw <= 1.0 + 1e-7), (j, raw)
+        if u_prev is not None:
+            assert np.all(np.abs(u - u_prev) <= settings.rate + 1e-7), (j, u - u_prev)
+        u_prev = u
+        theta = plant.step(theta, u)
+    assert ctl.fallbacks == 0
+    assert np.any(np.isclose(u_prev, 0.0, atol=1e-6) | np.isclose(u_prev, 1.0, atol=1e-6))  # a bound was met
+
+
+def test_mpc_runs_the_furnace_loop(small_radiation):
+    """The loop with ``control.feedback = "mpc"``: the MPC drives the small furnace."""
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    cfg = small_config()
+    loop = ClosedLoop(cfg, Scenario(duration=1.0, reference={"setpoint": 500.0, "t_E": 10.0},
+                                    control={"feedback": "mpc"}), small_radiation)
+    snaps = list(loop.run())
+    assert isinstance(loop.controller, MPCController) and loop.controller.fallbacks == 0
+    u = np.array([s.u for s in snaps])
+    assert np.all((u >= 0.0) & (u <= 1.0)) and len(loop.controller.step_ms) == len(snaps)
