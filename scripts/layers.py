@@ -44,7 +44,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("twin.user_files",),
     ("twin.scenario",),
     ("twin.limits",),
-    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin"),
+    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin.jsonable", "twin"),
 )
 
 

@@ -37,10 +37,11 @@ from backend.storage.data_dir import DataDir
 from backend.storage.recording import RecordingSink
 from backend.storage.repository import RunRepository
 from backend.storage.run_files import RunFiles, write_json_atomic, write_npz_atomic
-from backend.streaming.frames import SnapshotLike, events_of, json_safe, scalar_values
+from backend.streaming.frames import SnapshotLike, events_of, scalar_values
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.events import RunEvent, event_arrays, event_level
+from twin.jsonable import jsonable
 from twin.physics.fillet import Fillet
 from twin.runs.outage import run_ending
 from twin.runs.series_store import SeriesStore, consolidate
@@ -323,7 +324,7 @@ class RunWorker(RunChanges):
         metrics: dict[str, Any] | None = None
         if self.loop is not None and self.latest is not None:
             try:
-                metrics = json_safe(dict(self.loop.metrics()))
+                metrics = jsonable(dict(self.loop.metrics()))
             except Exception:
                 log.exception("run %s: metrics failed", self.run_id)
         if metrics is not None:

@@ -12,7 +12,7 @@ from pathlib import Path
 from backend.storage.recording_repair import repair_recording
 from backend.storage.repository import RunRepository
 from backend.storage.run_files import RunFiles, write_json_atomic
-from backend.streaming.frames import json_safe
+from twin.jsonable import jsonable
 from twin.runs.metrics import run_metrics
 from twin.runs.record import load_arrays
 from twin.runs.series_store import consolidate, has_parts
@@ -40,7 +40,7 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
         if not files.timeseries.is_file():
             continue
         try:
-            metrics = json_safe({**run_metrics(load_arrays(files.timeseries)), "status": "interrupted",
+            metrics = jsonable({**run_metrics(load_arrays(files.timeseries)), "status": "interrupted",
                                  "status_reason": INTERRUPTED_REASON})
         except Exception as exc:  # a file from an older layout: keep the run, say why
             log.warning("run %s: no metrics from %s: %s", run_id, files.timeseries, exc)

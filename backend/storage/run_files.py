@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from backend.streaming.frames import json_safe
+from twin.jsonable import jsonable
 from twin.runs.record import save_arrays
 
 RECORDING = "recording.rrd"
@@ -62,7 +62,7 @@ class RunFiles:
 
 def write_json_atomic(path: Path, obj: Any) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(json_safe(obj), indent=2, sort_keys=True, allow_nan=False))
+    tmp.write_text(json.dumps(jsonable(obj), indent=2, sort_keys=True, allow_nan=False))
     os.replace(tmp, path)
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 import sys
 from collections.abc import Callable, Iterable
@@ -27,6 +26,7 @@ from typing import Any, Protocol
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import FurnaceLost
+from twin.jsonable import jsonable
 from twin.limits import furnace_name, scenario_limits
 from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
@@ -91,7 +91,7 @@ def execute_run(
         loop.close()
     status, reason = loop.ending(end, error)
     metrics = {**loop.metrics(), "status": status, "status_reason": reason}
-    (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
+    (out / "metrics.json").write_text(json.dumps(jsonable(metrics), indent=2))
     if failure is not None:
         raise failure
     if figures and len(ts["t"]):
@@ -103,12 +103,6 @@ def execute_run(
         result["error"] = error
     return result
 
-
-def _json_safe(d: Any) -> Any:
-    """Metrics as JSON values: NaN / inf (a window the run did not reach) become null, nested too."""
-    if isinstance(d, dict):
-        return {k: _json_safe(v) for k, v in d.items()}
-    return None if isinstance(d, float) and not math.isfinite(d) else d
 
 
 def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
@@ -145,7 +139,7 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
         return 1
     if args.json:
-        print(json.dumps(_json_safe(result)))  # noqa: T201
+        print(json.dumps(jsonable(result)))  # noqa: T201
     else:
         for k, v in result.items():
             log.info("%-36s %s", k, f"{v:.4f}" if isinstance(v, float) else v)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from twin.config import FurnaceConfig, config_from_dict
+from twin.jsonable import jsonable
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +159,7 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
         t3 = time.perf_counter()
         rec["run_s"] = t3 - t2
         metrics = loop.metrics()
-        rec["metrics"] = {k: finite_or_none(v) for k, v in metrics.items()}
+        rec["metrics"] = jsonable(metrics)
         if task.keep_series:  # the timeseries.npz layout (product.md); the client writes the file
             buf = io.BytesIO()
             np.savez_compressed(buf, **{k: np.asarray(v) for k, v in loop.timeseries().items()})  # type: ignore[arg-type]
@@ -169,9 +170,3 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
         log.exception("case %s failed", task.key)
         rec["error"] = f"{type(exc).__name__}: {exc}"
 
-
-def finite_or_none(v: Any) -> Any:
-    """A metric for JSON and Parquet: NaN / inf (a window the run did not reach) -> None; others unchanged."""
-    if isinstance(v, (float, np.floating)):
-        return float(v) if np.isfinite(v) else None
-    return v
