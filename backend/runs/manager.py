@@ -49,10 +49,10 @@ from backend.runs.types import (  # noqa: F401  (re-exported: the routes and the
 from backend.runs.worker import LoopFactory, RunWorker
 from backend.storage.data_dir import DataDir, run_bytes
 from backend.storage.repository import ACTIVE_STATUSES, DEGRADED, ChangeRow, RunRepository, RunRow, clean_label
-from backend.storage.run_files import RunFiles, write_json_atomic
 from backend.streaming.fanout import StreamHub
 from twin.config import FurnaceConfig
 from twin.limits import ScenarioLimits, scenario_limits
+from twin.runs.folder import RunFolder
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -89,8 +89,8 @@ class RunManager(RunDriver):
         #: the data directory's usage, quota, free space and retention (backend.storage.data_dir)
         self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
-    def files(self, run_id: str) -> RunFiles:
-        return RunFiles(self.settings.runs_dir / run_id)
+    def files(self, run_id: str) -> RunFolder:
+        return RunFolder(self.settings.runs_dir / run_id)
 
     # ---- start ----
     def model_ready(self) -> bool:
@@ -147,7 +147,7 @@ class RunManager(RunDriver):
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
         files.folder.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
+        files.write_scenario(scenario)
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
                            disk=self.disk, notes=notes, live_url=self.live_url)

@@ -36,13 +36,13 @@ from backend.runs.events import RunEvents, end_event
 from backend.storage.data_dir import DataDir
 from backend.storage.recording import RecordingSink
 from backend.storage.repository import RunRepository
-from backend.storage.run_files import RunFiles, write_json_atomic, write_npz_atomic
 from backend.streaming.frames import SnapshotLike, events_of, scalar_values
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.events import RunEvent, event_arrays, event_level
 from twin.jsonable import jsonable
 from twin.physics.fillet import Fillet
+from twin.runs.folder import RunFolder
 from twin.runs.outage import run_ending
 from twin.runs.series_store import SeriesStore, consolidate
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
@@ -107,7 +107,7 @@ class RunWorker(RunChanges):
         cfg: FurnaceConfig,
         settings: Settings,
         repo: RunRepository,
-        files: RunFiles,
+        files: RunFolder,
         loop_factory: LoopFactory,
         *,
         disk: DataDir | None = None,
@@ -288,12 +288,11 @@ class RunWorker(RunChanges):
         elif record is not None and self.latest is not None:
             self.series.append(record)
         elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
-            write_npz_atomic(self.files.timeseries, data)
+            self.files.write_timeseries(data, compress=False)
         if self.recording is not None:
             self.recording.flush()
         if self.fault_events or self.faults:
-            write_json_atomic(self.files.faults, {"injected": [f.model_dump(mode="json") for f in self.faults],
-                                                  "events": self.fault_events})
+            self.files.write_faults(self.faults, self.fault_events)
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 
@@ -330,7 +329,7 @@ class RunWorker(RunChanges):
         if metrics is not None:
             if self.ending is not None:
                 metrics.update(status=self.ending[0], status_reason=self.ending[1])
-            write_json_atomic(self.files.metrics, metrics)
+            self.files.write_metrics(metrics)
         try:
             self.flush(metrics)
             consolidate(self.files.folder, self.files.timeseries, load=False)  # timeseries.npz of product.md

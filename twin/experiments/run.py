@@ -28,9 +28,10 @@ from twin.config import FurnaceConfig
 from twin.furnace.interface import FurnaceLost
 from twin.jsonable import jsonable
 from twin.limits import furnace_name, scenario_limits
+from twin.runs.folder import RunFolder
 from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
-from twin.runs.record import Snapshot, save_arrays
+from twin.runs.record import Snapshot
 from twin.user_files import ScenarioError, load_scenario
 
 log = logging.getLogger(__name__)
@@ -62,8 +63,8 @@ def execute_run(
     with ``error`` if the furnace was lost; the data up to then is written all the same).  A run that fails
     (the estimate diverged, ...) or is interrupted (Ctrl-C) writes its data and ``metrics.json`` with status
     ``error`` / ``stopped``, then raises."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
+    folder = RunFolder(out).create()
+    folder.write_scenario(loop.scenario)
     sinks = [make(out, loop) for make in sink_factories]
     flush_every = max(1, int(round(flush_every_s / loop.t_s)))
     end, error = "finished", None
@@ -73,7 +74,7 @@ def execute_run(
             for sink in sinks:
                 sink.add(snap)
             if snap.j % flush_every == 0 and snap.j > 0:
-                loop.record.save(out / "timeseries.npz")
+                folder.write_timeseries(loop.timeseries())
                 for sink in sinks:
                     sink.flush()
     except FurnaceLost as exc:
@@ -85,13 +86,13 @@ def execute_run(
         end, error, failure = "error", f"{type(exc).__name__}: {exc}", exc
     finally:
         ts = loop.timeseries()
-        save_arrays(out / "timeseries.npz", ts)
+        folder.write_timeseries(ts)
         for sink in sinks:
             sink.close()
         loop.close()
     status, reason = loop.ending(end, error)
     metrics = {**loop.metrics(), "status": status, "status_reason": reason}
-    (out / "metrics.json").write_text(json.dumps(jsonable(metrics), indent=2))
+    folder.write_metrics(metrics)
     if failure is not None:
         raise failure
     if figures and len(ts["t"]):
