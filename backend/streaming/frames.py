@@ -59,6 +59,8 @@ class SnapshotLike(Protocol):
     @property
     def events(self) -> Any: ...
     @property
+    def blind_since(self) -> float | None: ...  # run time since which no TC reading reached the estimate
+    @property
     def parameters(self) -> Any: ...  # (3,) calibrated deviations or None
     @property
     def parameter_sigma(self) -> Any: ...

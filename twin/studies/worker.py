@@ -138,6 +138,7 @@ def run_case(task: CaseTask, furnace: dict[str, Any]) -> dict[str, Any]:
 def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float) -> None:
     from twin.furnace.simulated import SimulatedFurnace
     from twin.runs.loop import ClosedLoop
+    from twin.runs.session import RunSession
     from twin.scenario import Scenario
 
     try:
@@ -151,15 +152,15 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
                                                                                       truth_radiation=own))
         t2 = time.perf_counter()
         rec["plan_s"] = t2 - t1
+        session = RunSession(loop)  # no folder: the record travels back to the client, which writes it
         try:
             while not loop.done:
-                loop.step()
+                session.step()
         finally:
-            loop.close()
+            session.close()
         t3 = time.perf_counter()
         rec["run_s"] = t3 - t2
-        metrics = loop.metrics()
-        rec["metrics"] = jsonable(metrics)
+        rec["metrics"] = jsonable(loop.metrics())
         if task.keep_series:  # the timeseries.npz layout (product.md); the client writes the file
             buf = io.BytesIO()
             np.savez_compressed(buf, **{k: np.asarray(v) for k, v in loop.timeseries().items()})  # type: ignore[arg-type]
