@@ -41,7 +41,7 @@ from backend.api.schema_limits import apply_limits
 from backend.core.errors import validation_error
 from backend.core.security import SecurityMiddleware
 from backend.core.settings import Settings
-from backend.runs.changes import ChangeCancelled, ChangeRejected
+from backend.runs.factory import LoopFactory
 from backend.runs.manager import (
     InsufficientStorage,
     LimitExceeded,
@@ -53,12 +53,12 @@ from backend.runs.manager import (
     RunNotFound,
     TooManyRuns,
 )
-from backend.runs.worker import LoopFactory
 from backend.storage.recovery import recover_interrupted
 from backend.storage.repository import RunRepository
 from backend.studies.manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
 from twin.config import SHIPPED_FURNACES, FurnaceConfig, load_config
 from twin.limits import scenario_limits
+from twin.runs.changes import ChangeCancelled, ChangeRejected
 
 log = logging.getLogger(__name__)
 

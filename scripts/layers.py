@@ -35,6 +35,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("backend.storage",),  # database, run folders, recordings
     ("backend.streaming",),  # frames, fan-out, series, rerun viewer
     ("backend.core",),  # settings, security, errors
+    ("twin",),  # the public API (twin/__init__.py): the names a script uses, imported on first use
     ("twin.experiments", "twin.studies"),  # what a user runs: a run, the campaign, design studies
     ("twin.runs",),  # the loop, its record, metrics
     ("twin.estimation", "twin.control"),  # the twin side
@@ -44,7 +45,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("twin.user_files",),
     ("twin.scenario",),
     ("twin.limits",),
-    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin"),
+    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin.jsonable"),
 )
 
 

@@ -60,6 +60,15 @@ def _limits(info: ValidationInfo) -> ScenarioLimits:
     return _context_limits(info) or _DEFAULT
 
 
+def _furnace_default(data: Any, info: ValidationInfo, name: str) -> Any:
+    """With a furnace's limits in the context, a field ``name`` left out takes that furnace's default
+    (``ScenarioLimits.<name>.default``); without them the model's own default stands."""
+    given = _context_limits(info)
+    if given is not None and isinstance(data, dict):
+        return {name: getattr(given, name).default, **data}
+    return data
+
+
 def _check(r: lim.Range, value: float) -> float:
     problem = r.problem(value)
     if problem is not None:
@@ -86,10 +95,7 @@ class TransitionReference(_Model):
     @model_validator(mode="before")
     @classmethod
     def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
-        given = _context_limits(info)
-        if given is not None and isinstance(data, dict):
-            return {"setpoint": given.setpoint.default, **data}
-        return data
+        return _furnace_default(data, info, "setpoint")
 
     @field_validator("setpoint")
     @classmethod
@@ -154,10 +160,7 @@ class OscillationSpec(_Model):
     @model_validator(mode="before")
     @classmethod
     def _furnace_defaults(cls, data: Any, info: ValidationInfo) -> Any:
-        given = _context_limits(info)
-        if given is not None and isinstance(data, dict):
-            return {"amplitude": given.amplitude.default, **data}
-        return data
+        return _furnace_default(data, info, "amplitude")
 
     @field_validator("amplitude")
     @classmethod

@@ -26,6 +26,17 @@ class ScenarioError(ValueError):
     """A scenario file or option is invalid; the message says which field and why."""
 
 
+def read_json(path: str, what: str, error: type[ValueError]) -> Any:
+    """The JSON value in the file at ``path``; ``error`` with one sentence naming ``what`` and the file if it
+    cannot be read or is not JSON."""
+    try:
+        return json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise error(f"cannot read {what} {path}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise error(f"{what} {path} is not valid JSON: {exc}") from None
+
+
 def load_scenario(
     path: str | None,
     limits: ScenarioLimits | None = None,
@@ -38,12 +49,7 @@ def load_scenario(
     fields the file leaves out take that furnace's defaults."""
     data: dict[str, Any] = {}
     if path is not None:
-        try:
-            data = json.loads(Path(path).read_text())
-        except OSError as exc:
-            raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
-        except json.JSONDecodeError as exc:
-            raise ScenarioError(f"scenario {path} is not valid JSON: {exc}") from None
+        data = read_json(path, "scenario", ScenarioError)
         if not isinstance(data, dict):
             raise ScenarioError(f"scenario {path} must be a JSON object")
     if oscillate:

@@ -14,12 +14,12 @@ from pydantic import ValidationError
 
 from backend.core.messages import field_path, plain_message
 from backend.core.settings import Settings
-from backend.runs.changes import ChangeRejected
+from backend.runs.factory import LoopFactory
 from backend.runs.types import LimitExceeded
-from backend.runs.worker import LoopFactory
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.limits import ScenarioLimits
+from twin.runs.changes import ChangeRejected
 from twin.scenario import FaultSpec, OscillationSpec, PlanParameters, Reference, Scenario, check, parse_faults
 
 
@@ -69,12 +69,10 @@ class RunChecks:
         off the event loop; it writes nothing); :class:`LimitExceeded` naming ``plant.endpoint`` if not."""
         if scenario.plant.kind == "simulated":
             return
-        probe = getattr(self.loop_factory, "check_plant", None)
-        if callable(probe):
-            try:
-                await asyncio.to_thread(probe, self.cfg, scenario)
-            except (ValueError, OSError) as exc:
-                raise LimitExceeded(f"plant.endpoint: {exc}") from None
+        try:
+            await asyncio.to_thread(self.loop_factory.check_plant, self.cfg, scenario)
+        except (ValueError, OSError) as exc:
+            raise LimitExceeded(f"plant.endpoint: {exc}") from None
 
     def change_limits(self, value: Reference | OscillationSpec | list[FaultSpec]) -> None:
         """Raise :class:`ChangeRejected` if a live change lies outside the furnace's limits (a fault list: its
@@ -93,28 +91,22 @@ class RunChecks:
         """The loop factory's feasibility verdict on a reference (``twin.control.feasibility.Feasibility``),
         off the event loop, on the model with what the twin has learnt (``parameters``); ``None`` if the
         factory has no such check."""
-        assess = getattr(self.loop_factory, "feasibility", None)
-        if not callable(assess):
-            return None
         learnt = {} if parameters is None else {"parameters": parameters}
-        return await asyncio.to_thread(functools.partial(assess, self.cfg, reference, duration, oscillation,
-                                                         T_initial, t_start, **learnt))
+        return await asyncio.to_thread(functools.partial(self.loop_factory.feasibility, self.cfg, reference, duration,
+                                                         oscillation, T_initial, t_start, **learnt))
 
     async def _limits_and_range(self, scenario: Scenario) -> None:
         self.limits_of(scenario)
-        reachable = getattr(self.loop_factory, "check_reference", None)
-        if callable(reachable):  # off the event loop: the first call may load the radiation model
-            try:
-                await asyncio.to_thread(reachable, self.cfg, scenario.reference)
-            except ValueError as exc:
-                raise LimitExceeded(f"reference: {exc}") from None
-        check_plan = getattr(self.loop_factory, "check_plan", None)
-        if callable(check_plan):  # the first plan within this server's time and memory (twin.control.budget)
-            budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
-            try:
-                await asyncio.to_thread(check_plan, self.cfg, scenario, budget)
-            except ValueError as exc:
-                raise LimitExceeded(f"reference: {exc}") from None
+        try:  # off the event loop: the first call may load the radiation model
+            await asyncio.to_thread(self.loop_factory.check_reference, self.cfg, scenario.reference)
+        except ValueError as exc:
+            raise LimitExceeded(f"reference: {exc}") from None
+        # the first plan within this server's time and memory (twin.control.budget)
+        budget = PlanBudget(self.settings.plan_max_s, self.settings.plan_max_mb)
+        try:
+            await asyncio.to_thread(self.loop_factory.check_plan, self.cfg, scenario, budget)
+        except ValueError as exc:
+            raise LimitExceeded(f"reference: {exc}") from None
 
     async def start(self, scenario: Scenario) -> tuple[str, ...]:
         """Everything a new run must pass; returns its feasibility warnings (:class:`LimitExceeded` if refused).
@@ -131,8 +123,7 @@ class RunChecks:
         """What :meth:`start` would say, as JSON (``POST /api/feasibility``): ``verdict`` ok / warn / refuse,
         ``messages``, and the feasibility details (``best`` reachable mean, ``hold_range``).  While the radiation
         model warms up only the limits are checked: ``pending`` says so (the run would wait as ``queued``)."""
-        ready = getattr(self.loop_factory, "ready", None)
-        if callable(ready) and not ready(self.cfg):
+        if not self.loop_factory.ready(self.cfg):
             try:
                 self.limits_of(scenario)
             except LimitExceeded as exc:

@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 
 from backend.core.settings import Settings
 from backend.runs.checks import RunChecks
+from backend.runs.factory import LoopFactory
 from backend.runs.types import LimitExceeded
-from backend.runs.worker import LoopFactory, RunWorker
+from backend.runs.worker import RunWorker
 from backend.storage.repository import DEGRADED, RunRepository
 from backend.streaming.fanout import StreamHub
 from backend.streaming.frames import SnapshotLike, frame_extra, frame_json
@@ -111,7 +112,8 @@ class RunDriver:
                 adv = await aio.run_in_executor(run.executor, w.advance, ADVANCE_BUDGET_S)
                 now = time.monotonic()
                 if run.status in (RUNNING, DEGRADED):  # degraded while no TC reading reaches the estimate
-                    run.status = DEGRADED if getattr(w.latest, "blind_since", None) is not None else RUNNING
+                    blind = w.latest is not None and w.latest.blind_since is not None
+                    run.status = DEGRADED if blind else RUNNING
                 if every_sample:  # the samples come slower than the frame cap: send each one
                     for snap, seq, wall in adv.samples:
                         run.hub.publish(self._frame(run_id, run, snap, seq, wall, run.status))
@@ -158,7 +160,7 @@ class RunDriver:
             final, error = "error", f"{type(exc).__name__}: {exc}"
         finally:
             w.stop_requested.set()
-            w.cancel_changes(f"the run is {final}")
+            w.changes.cancel_all(f"the run is {final}")
             try:
                 await asyncio.shield(aio.run_in_executor(run.executor, w.finalize, final, error))
             except Exception:
@@ -181,14 +183,8 @@ class RunDriver:
         """Wait (as ``queued``) until the radiation model is ready; False if the run was stopped meanwhile."""
         if self.model_ready():
             return True
-        wait = getattr(self.loop_factory, "wait_ready", None)
         log.info("run waits for the radiation model")
         while not run.worker.stop_requested.is_set():
-            if callable(wait):
-                if await asyncio.to_thread(wait, self.cfg, 0.25):
-                    return True
-            elif self.model_ready():
+            if await asyncio.to_thread(self.loop_factory.wait_ready, self.cfg, 0.25):
                 return True
-            else:
-                await asyncio.sleep(0.25)
         return False

@@ -18,9 +18,10 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 from backend.core.settings import Settings
-from backend.runs.worker import LoopLike
+from backend.runs.factory import LoopFactory
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
+from twin.runs.interface import Loop
 from twin.scenario import OscillationSpec, PlanParameters, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -65,7 +66,7 @@ class WarmUpStatus:
 MAX_SPEED_NICENESS = 5
 
 
-class DefaultLoopFactory:
+class DefaultLoopFactory(LoopFactory):
     """Builds the server's runs: a simulated furnace's ``twin.runs.loop.ClosedLoop`` in its own process
     (:class:`backend.runs.process_loop.ProcessLoop`, which reads the radiation models from the disk cache), or in
     the server's process with ``processes=False`` (sharing the radiation models loaded here); a run on a
@@ -284,7 +285,7 @@ class DefaultLoopFactory:
 
         probe_furnace(cfg, scenario, opcua=self.settings.opcua, data_dir=self.settings.data_dir)
 
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike:
+    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> Loop:
         from twin.furnace.connect import open_furnace
         from twin.runs.loop import ClosedLoop
 
@@ -301,7 +302,7 @@ class DefaultLoopFactory:
                                data_dir=self.settings.data_dir)
         try:
             # background=True: re-plans run in the loop's own thread, so a change never stalls the samples
-            loop: LoopLike = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True,
+            loop: Loop = ClosedLoop(cfg, scenario, radiation=rad, furnace=furnace, background=True,
                                         budget=budget)
         except BaseException:
             furnace.close()

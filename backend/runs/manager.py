@@ -27,9 +27,9 @@ from collections.abc import Coroutine
 from typing import Any, TypeVar
 
 from backend.core.settings import Settings
-from backend.runs.changes import ChangeRejected
 from backend.runs.checks import RunChecks
 from backend.runs.driver import ActiveRun, RunDriver
+from backend.runs.factory import LoopFactory
 from backend.runs.loop_factory import DefaultLoopFactory
 from backend.runs.start_requests import RequestReused, StartRequests
 from backend.runs.types import (  # noqa: F401  (re-exported: the routes and the UIs import them from here)
@@ -46,14 +46,15 @@ from backend.runs.types import (  # noqa: F401  (re-exported: the routes and the
     TooManyRuns,
     in_force,
 )
-from backend.runs.worker import LoopFactory, RunWorker
+from backend.runs.worker import RunWorker
 from backend.storage.data_dir import DataDir, run_bytes
 from backend.storage.repository import ACTIVE_STATUSES, DEGRADED, ChangeRow, RunRepository, RunRow, clean_label
-from backend.storage.run_files import RunFiles, write_json_atomic
 from backend.streaming.fanout import StreamHub
 from twin.config import FurnaceConfig
 from twin.limits import ScenarioLimits, scenario_limits
-from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
+from twin.runs.changes import ChangeRejected
+from twin.runs.folder import RunFolder
+from twin.scenario import FaultSpec, OpcUaPlant, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -89,20 +90,18 @@ class RunManager(RunDriver):
         #: the data directory's usage, quota, free space and retention (backend.storage.data_dir)
         self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
-    def files(self, run_id: str) -> RunFiles:
-        return RunFiles(self.settings.runs_dir / run_id)
+    def files(self, run_id: str) -> RunFolder:
+        return RunFolder(self.settings.runs_dir / run_id)
 
     # ---- start ----
     def model_ready(self) -> bool:
         """The loop factory can build a run now (its radiation models are loaded); a factory without a
         warm-up is always ready."""
-        ready = getattr(self.loop_factory, "ready", None)
-        return True if not callable(ready) else bool(ready(self.cfg))
+        return bool(self.loop_factory.ready(self.cfg))
 
     def warm_up(self) -> Any:
         """The radiation model's :class:`backend.runs.loop_factory.WarmUpStatus`; ``None`` for a factory without one."""
-        status = getattr(self.loop_factory, "warm_up_status", None)
-        return status(self.cfg) if callable(status) else None
+        return self.loop_factory.warm_up_status(self.cfg)
 
     def retry_warm_up(self) -> bool:
         """Start the radiation model's warm-up again after it failed; False if it has not failed."""
@@ -154,7 +153,7 @@ class RunManager(RunDriver):
         run_id = uuid.uuid4().hex[:12]
         files = self.files(run_id)
         files.folder.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(files.scenario, scenario.model_dump(mode="json"))
+        files.write_scenario(scenario)
         self._repo.create_run(run_id, scenario.to_json())
         worker = RunWorker(run_id, scenario, self.cfg, self.settings, self._repo, files, self.loop_factory,
                            disk=self.disk, notes=notes, live_url=self.live_url)
@@ -183,7 +182,7 @@ class RunManager(RunDriver):
             return
         for run_id, run in self._runs.items():
             other = run.worker.scenario.plant
-            if other.kind == plant.kind and getattr(other, "endpoint", None) == plant.endpoint:
+            if isinstance(other, OpcUaPlant) and other.endpoint == plant.endpoint:
                 raise PlantBusy(f"run {run_id} already drives the furnace at {plant.endpoint}: stop it first")
 
     # ---- control ----
@@ -221,7 +220,7 @@ class RunManager(RunDriver):
         body = ({"faults": [f.model_dump(mode="json") for f in value]} if isinstance(value, list)
                 else value.model_dump(mode="json"))
         change_id = self._repo.add_change(run_id, kind, body)
-        fut = run.worker.submit_change(kind, value, change_id, notes)
+        fut = run.worker.changes.submit(kind, value, change_id, notes)
         run.wake.set()
         try:
             result = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)),

@@ -3,7 +3,7 @@
 With the loops in the server's threads, two runs at speed ``max`` keep the interpreter's lock (GIL)
 busy, and every websocket send of the event loop (each one releases and retakes it) waits for it:
 the frames of the other clients come late.  :class:`ProcessLoop` runs ``twin.runs.loop.ClosedLoop``
-in a child process and answers the calls the run worker makes (``backend.runs.worker.LoopLike``):
+in a child process and answers the calls of the ``twin.runs.interface.Loop`` protocol:
 each ``step()`` is one round trip over a pipe that returns the sample's snapshot.  The child appends
 the run's time series itself (:meth:`ProcessLoop.append_series`, ``twin.runs.series_store``), so
 flushes do not copy it between processes.  Runs at speed ``max`` get a lower CPU priority (``nice``): the server and the
@@ -23,6 +23,7 @@ import multiprocessing
 import os
 import signal
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -30,6 +31,7 @@ from typing import Any
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
+from twin.events import RunEvent
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 log = logging.getLogger(__name__)
@@ -96,7 +98,6 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
     from twin.radiation import radiation_model
     from twin.runs.loop import ClosedLoop
     from twin.runs.record import save_arrays
-    from twin.runs.series_store import SeriesStore
 
     try:
         cfg = FurnaceConfig.model_validate_json(cfg_json)
@@ -106,7 +107,6 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
         conn.send(("error", _portable(exc)))
         return
     conn.send(("ok", {"tc_positions": loop.tc_positions, "done": loop.done}))
-    store: SeriesStore | None = None
     changes: dict[int, Future[float]] = {}  # changes still being planned (twin.runs.replanning), by id
 
     def outcome(fut: Future[float]) -> tuple[bool, Any]:
@@ -133,7 +133,7 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
                 snap = loop.step()
                 result: Any = (snap, loop.done, settled(), loop.replanning)
             elif method in ("set_reference", "set_oscillation"):
-                fut = getattr(loop, method)(*args)
+                fut = loop.set_reference(*args) if method == "set_reference" else loop.set_oscillation(*args)
                 if not isinstance(fut, Future):
                     result = ("done", (True, None))
                 elif fut.done():
@@ -144,39 +144,24 @@ def _serve(conn: Connection, cfg_json: str, scenario_json: str, niceness: int,
                     result = ("later", key)
             elif method == "replanning":
                 result = loop.replanning
-            elif method == "add_event":
-                loop.record.add_event(*args)
-                result = None
             elif method == "save_timeseries":
                 save_arrays(args[0], loop.timeseries(), compress=False)
                 result = None
-            elif method == "append_series":
-                store = store or SeriesStore(Path(args[0]))
-                store.append(loop.record)
-                result = None
             else:
-                result = getattr(loop, method)(*args)
+                calls: dict[str, Callable[..., Any]] = {
+                    "add_event": loop.add_event, "append_series": loop.append_series, "set_faults": loop.set_faults,
+                    "faults_in_force": loop.faults_in_force, "timeseries": loop.timeseries, "metrics": loop.metrics,
+                    "ending": loop.ending}
+                if method not in calls:
+                    raise ValueError(f"a run's loop has no call {method!r}")
+                result = calls[method](*args)
             conn.send(("ok", result))
         except BaseException as exc:
             conn.send(("error", _portable(exc)))
 
 
-class _RecordInChild:
-    """The part of the child's ``RunRecord`` the run worker writes to: the server's own events (the start, the
-    changes' outcomes, saturated groups, the end) go into the series the child appends."""
-
-    def __init__(self, owner: ProcessLoop) -> None:
-        self._owner = owner
-
-    def add_event(self, event: Any) -> None:
-        try:
-            self._owner._call("add_event", event)
-        except LoopProcessError:  # the child is gone: the worker's own list still has the event
-            log.warning("event not recorded, the run's process has ended: %s", getattr(event, "text", event))
-
-
 class ProcessLoop:
-    """``ClosedLoop(cfg, scenario)`` in a child process (module docstring); the run worker's ``LoopLike``."""
+    """``ClosedLoop(cfg, scenario)`` in a child process (module docstring); a ``twin.runs.interface.Loop``."""
 
     def __init__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget | None = None,
                  niceness: int = 0) -> None:
@@ -205,7 +190,7 @@ class ProcessLoop:
         self._done = bool(info["done"])
         self._changes: dict[int, Future[float]] = {}  # the child's changes still being planned
         self._replanning = False
-        self.record = _RecordInChild(self)
+        self.scenario, self.t_s = scenario, cfg.sampling.t_s
 
     def _reply(self) -> Any:
         try:
@@ -224,7 +209,7 @@ class ProcessLoop:
             self._conn.send((method, args))
             return self._reply()
 
-    # ---- LoopLike ----
+    # ---- twin.runs.interface.Loop ----
     @property
     def done(self) -> bool:
         return self._done
@@ -282,10 +267,18 @@ class ProcessLoop:
         """Write the time series (``timeseries.npz`` layout) to ``path`` from the child, atomically."""
         self._call("save_timeseries", str(path))
 
-    def append_series(self, folder: str) -> None:
+    def append_series(self, folder: Path) -> None:
         """Append the samples since the last call to the run's series parts in ``folder``
         (``twin.runs.series_store``), from the child."""
-        self._call("append_series", folder)
+        self._call("append_series", Path(folder))
+
+    def add_event(self, event: RunEvent) -> None:
+        """The server's own events (the start, the changes' outcomes, saturated groups, the end) go into the
+        series the child appends."""
+        try:
+            self._call("add_event", event)
+        except LoopProcessError:  # the child is gone: the worker's own list still has the event
+            log.warning("event not recorded, the run's process has ended: %s", event.text)
 
     def ending(self, end: str, error: str | None = None) -> tuple[str, str | None]:
         """The run's status and reason as the child's loop knows them (a run that finished blind: degraded)."""

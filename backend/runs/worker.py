@@ -8,7 +8,7 @@ possible) for at most a small wall-time budget and returns the latest snapshot. 
 real-time furnace (``paced_by_furnace``) is not paced here: its step waits, in this thread, for the
 furnace's next sample, so the furnace's clock drives the run and the server's event loop never waits.
 Reference / oscillation / fault changes are queued and handed to the loop between two samples, in
-this thread, never on the event loop (``backend.runs.changes``, mixed into the worker).  A loop that
+this thread, never on the event loop (``twin.runs.changes.ChangeQueue``, held by the worker).  A loop that
 re-plans in the background returns a future per change (``twin.runs.replanning``): the change is
 ``pending`` until its plan is in force (``applied``, with the run time), and ends ``superseded`` (a later
 change of the same kind won), ``failed`` / ``rejected`` (nothing of it applied) or ``cancelled`` (the run
@@ -25,54 +25,28 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
-from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 from backend.core.settings import Settings
-from backend.runs.changes import RunChanges, _Change
 from backend.runs.events import RunEvents, end_event
+from backend.runs.factory import LoopFactory
 from backend.storage.data_dir import DataDir
 from backend.storage.recording import RecordingSink
 from backend.storage.repository import RunRepository
-from backend.storage.run_files import RunFiles, write_json_atomic, write_npz_atomic
-from backend.streaming.frames import SnapshotLike, events_of, json_safe, scalar_values
+from backend.streaming.frames import SnapshotLike, events_of, scalar_values
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
 from twin.events import RunEvent, event_arrays, event_level
 from twin.physics.fillet import Fillet
+from twin.runs.changes import ChangeQueue
+from twin.runs.folder import RunFolder
+from twin.runs.interface import Loop
 from twin.runs.outage import run_ending
-from twin.runs.series_store import SeriesStore, consolidate
+from twin.runs.session import RunSession
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
 
 log = logging.getLogger(__name__)
-
-
-class LoopLike(Protocol):
-    """The part of ``twin.runs.loop.ClosedLoop`` the backend uses (docs/interfaces.md)."""
-
-    @property
-    def done(self) -> bool: ...
-
-    @property
-    def paced_by_furnace(self) -> bool: ...  # a real-time furnace: step() waits for its samples
-
-    def step(self) -> Any: ...
-
-    def set_reference(self, ref: Reference) -> Future[float] | None: ...
-
-    def set_oscillation(self, spec: OscillationSpec) -> Future[float] | None: ...
-
-    def timeseries(self) -> dict[str, Any]: ...
-
-    def metrics(self) -> dict[str, Any]: ...
-
-
-class LoopFactory(Protocol):
-    """Builds a run's loop; its first plan keeps to ``budget`` and stops when the budget is cancelled."""
-
-    def __call__(self, cfg: FurnaceConfig, scenario: Scenario, *, budget: PlanBudget) -> LoopLike: ...
 
 
 #: the events of a run that faults.json keeps (twin.furnace.simulated.faults, twin.runs.loop)
@@ -96,7 +70,7 @@ class Advance:
     wait_s: float
 
 
-class RunWorker(RunChanges):
+class RunWorker:
     """Steps one closed loop at the scenario's speed and persists what it produces."""
 
     def __init__(
@@ -106,7 +80,7 @@ class RunWorker(RunChanges):
         cfg: FurnaceConfig,
         settings: Settings,
         repo: RunRepository,
-        files: RunFiles,
+        files: RunFolder,
         loop_factory: LoopFactory,
         *,
         disk: DataDir | None = None,
@@ -122,29 +96,39 @@ class RunWorker(RunChanges):
         self.repo = repo
         self.files = files
         self._factory = loop_factory
-        self.loop: LoopLike | None = None
+        self.loop: Loop | None = None
+        self.session: RunSession | None = None  #: the loop with the run's folder and recording (twin.runs.session)
         self.recording: RecordingSink | None = None
         self.speed: float | None = None if scenario.speed == "max" else float(scenario.speed)
-        self.reference: Reference = scenario.reference
-        self.oscillation: OscillationSpec = scenario.oscillation
-        #: the faults injected (``at`` in run time; scenario's, then each applied PUT) and the fault events so far
-        self.faults: list[FaultSpec] = list(scenario.faults)
-        self.fault_events: list[dict[str, Any]] = []
+        #: the live changes (``twin.runs.changes``): each outcome in the change's row and as an event
+        self.changes = ChangeQueue(run_id, scenario, repo.finish_change, self._add_later)
+        self.fault_events: list[dict[str, Any]] = []  #: the fault events so far
         self.latest: SnapshotLike | None = None
         self.ending: tuple[str, str | None] | None = None  # (status, status_reason) once finalised
         self.latest_wall = 0.0
         self.seq = 0
         self.stop_requested = threading.Event()
-        self._changes: deque[_Change] = deque()
-        self._changes_lock = threading.Lock()
         self._origin_wall = 0.0
         self._origin_t = 0.0
         self._last_flush = 0.0
-        self.series = SeriesStore(files.folder)  # the time series, appended at each flush
         self._events = RunEvents(tuple(g.name for g in cfg.lamps.groups), cfg.sampling.t_s)
         self.events = self._events.items  #: the run's events, oldest first (backend.runs.events)
         self.notes = notes  #: feasibility warnings of the scenario, reported as events when the run starts
         self.fillet = Fillet.of(cfg)  # for the frames' spread (backend.streaming.frames.frame_extra)
+
+    # ---- what is in force (the scenario's, then each applied change) ----
+    @property
+    def reference(self) -> Reference:
+        return self.changes.reference
+
+    @property
+    def oscillation(self) -> OscillationSpec:
+        return self.changes.oscillation
+
+    @property
+    def faults(self) -> list[FaultSpec]:
+        """The faults injected (``at`` in run time: the scenario's, then each applied PUT)."""
+        return self.changes.faults
 
     # ---- events ----
     def add_event(self, t: float, text: str, level: str = "info", *, in_record: bool = False) -> None:
@@ -152,9 +136,8 @@ class RunWorker(RunChanges):
         put it there already) and the recording."""
         event = RunEvent(float(t), text, level)
         self.events.append(event)
-        note = getattr(getattr(self.loop, "record", None), "add_event", None)
-        if not in_record and callable(note):
-            note(event)
+        if not in_record and self.loop is not None:
+            self.loop.add_event(event)
         if self.recording is not None:
             self.recording.log_event(event.t, event.text, event.level)
 
@@ -177,6 +160,7 @@ class RunWorker(RunChanges):
             image_interval=self.settings.recording_image_interval_s, live_url=self.live_url,
         )
         self.loop = self._factory(self.cfg, self.scenario, budget=self.budget())
+        self.session = RunSession(self.loop, self.files, sinks=[self.recording])
         if self.stop_requested.is_set():  # stopped while the first plan was being made
             raise PlanCancelled("the run was stopped while it was starting")
         sc = self.scenario
@@ -206,7 +190,7 @@ class RunWorker(RunChanges):
 
     def advance(self, budget_s: float) -> Advance:
         """Step while samples are due (speed) for at most ``budget_s`` wall seconds."""
-        assert self.loop is not None
+        assert self.loop is not None and self.session is not None
         start = time.monotonic()
         steps = 0
         samples: list[tuple[SnapshotLike, int, float]] = []
@@ -214,9 +198,10 @@ class RunWorker(RunChanges):
         wait = 0.0
         self._add_queued()
         while not self.stop_requested.is_set() and not self._finished():
-            if self._apply_changes():
+            t_next = float(self.latest.t) + t_s if self.latest is not None else 0.0  # the first that could use it
+            if self.changes.hand_over(self.loop, t_next):
                 self._rebase(float(self.latest.t) if self.latest is not None else 0.0)
-            if self.speed is None and getattr(self.loop, "replanning", False):
+            if self.speed is None and self.loop.replanning:
                 # at speed max simulated time waits for a re-plan (free here), so the plan is not stale
                 # when it comes in and a change counts from the sample it was asked at; in real time
                 # the furnace goes on under the old plan
@@ -228,13 +213,11 @@ class RunWorker(RunChanges):
                 wait = due - time.monotonic()
                 if wait > 0:
                     break
-            snap = self.loop.step()
+            snap = self.session.step()  # into the run record and the recording
             self.latest, self.latest_wall = snap, time.time()
             self.seq += 1
             steps += 1
             samples.append((snap, self.seq, self.latest_wall))
-            if self.recording is not None:
-                self.recording.add(snap)
             self._add_queued()
             for text in events_of(snap.events):  # the loop put them into its record with the sample
                 self.add_event(float(snap.t), text, event_level(text), in_record=True)
@@ -259,8 +242,6 @@ class RunWorker(RunChanges):
             return None
         data = dict(self.loop.timeseries())
         data.setdefault("scenario", self.scenario.to_json())
-        if not callable(getattr(getattr(self.loop, "record", None), "add_event", None)):
-            data.update(event_arrays(list(self.events)))  # a loop without a record of its own: the worker's
         return data
 
     def live_series(self) -> dict[str, Any] | None:
@@ -280,34 +261,21 @@ class RunWorker(RunChanges):
         """Append the new samples to the time series (``twin.runs.series_store``), store the latest values and
         push the recording's buffer to disk."""
         self._last_flush = time.monotonic()
-        append = getattr(self.loop, "append_series", None)  # a loop in its own process appends there
-        record = getattr(self.loop, "record", None)
-        if callable(append) and self.latest is not None:
-            append(str(self.files.folder))
-        elif record is not None and self.latest is not None:
-            self.series.append(record)
-        elif (data := self._timeseries()) is not None:  # a loop without a record: the whole file each time
-            write_npz_atomic(self.files.timeseries, data)
-        if self.recording is not None:
+        if self.session is not None:  # a loop in its own process appends there
+            self.session.flush()
+        elif self.recording is not None:
             self.recording.flush()
         if self.fault_events or self.faults:
-            write_json_atomic(self.files.faults, {"injected": [f.model_dump(mode="json") for f in self.faults],
-                                                  "events": self.fault_events})
+            self.files.write_faults(self.faults, self.fault_events)
         latest = None if self.latest is None else scalar_values(self.latest)
         self.repo.save_progress(self.run_id, latest, metrics)
 
     def _ending(self, status: str, error: str | None) -> tuple[str, str | None]:
         """The run's status and its reason (``twin.runs.outage.run_ending``: a run that finished blind ended
         ``degraded``), from the loop that knows when it ran blind."""
-        t_end = float(self.latest.t) if self.latest is not None else 0.0
-        ending = getattr(self.loop, "ending", None)
-        if callable(ending) and self.latest is not None:
-            try:
-                got = ending(status, error)
-                return str(got[0]), got[1]
-            except Exception:
-                log.exception("run %s: its ending failed", self.run_id)
-        return run_ending(status, error, None, t_end)
+        if self.session is not None:
+            return self.session.end(status, error)
+        return run_ending(status, error, None, float(self.latest.t) if self.latest is not None else 0.0)
 
     def _remember(self, metrics: dict[str, Any]) -> None:
         """A finished run's calibration goes to the furnace's memory (twin.control.calibration_memory)."""
@@ -333,24 +301,17 @@ class RunWorker(RunChanges):
             end = end_event(final, float(self.latest.t) if self.latest is not None else 0.0,
                             reason if final == "degraded" else error)
             self.add_event(end.t, end.text, end.level)
-        metrics: dict[str, Any] | None = None
-        if self.loop is not None and self.latest is not None:
-            try:
-                metrics = json_safe(dict(self.loop.metrics()))
-            except Exception:
-                log.exception("run %s: metrics failed", self.run_id)
+        metrics = self.session.metrics() if self.session is not None else None
         if metrics is not None:
             if self.ending is not None:
                 metrics.update(status=self.ending[0], status_reason=self.ending[1])
-            write_json_atomic(self.files.metrics, metrics)
+            self.files.write_metrics(metrics)
             self._remember(metrics)
         try:
             self.flush(metrics)
-            consolidate(self.files.folder, self.files.timeseries, load=False)  # timeseries.npz of product.md
-        finally:
-            if self.recording is not None:
+        finally:  # timeseries.npz of product.md from the parts, the recording and the loop closed
+            if self.session is not None:
+                self.session.close()
+            elif self.recording is not None:
                 self.recording.close()
-            close = getattr(self.loop, "close", None)
-            if callable(close):
-                close()
         return metrics

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from backend.storage.recording_repair import repair_recording
 from backend.storage.repository import RunRepository
-from backend.storage.run_files import RunFiles, write_json_atomic
-from backend.streaming.frames import json_safe
+from twin.jsonable import jsonable
+from twin.runs.folder import RunFolder
 from twin.runs.metrics import run_metrics
 from twin.runs.record import load_arrays
 from twin.runs.series_store import consolidate, has_parts
@@ -25,7 +25,7 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
     """Mark crashed runs interrupted; store metrics of the data they left. Returns their ids."""
     ids = repo.mark_interrupted()
     for run_id in ids:
-        files = RunFiles(runs_dir / run_id)
+        files = RunFolder(runs_dir / run_id)
         last_write = max((p.stat().st_mtime for p in files.folder.rglob("*") if p.is_file()), default=None) \
             if files.folder.is_dir() else None
         if last_write is not None:
@@ -40,12 +40,12 @@ def recover_interrupted(repo: RunRepository, runs_dir: Path) -> list[str]:
         if not files.timeseries.is_file():
             continue
         try:
-            metrics = json_safe({**run_metrics(load_arrays(files.timeseries)), "status": "interrupted",
-                                 "status_reason": INTERRUPTED_REASON})
+            metrics = jsonable({**run_metrics(load_arrays(files.timeseries)), "status": "interrupted",
+                                "status_reason": INTERRUPTED_REASON})
         except Exception as exc:  # a file from an older layout: keep the run, say why
             log.warning("run %s: no metrics from %s: %s", run_id, files.timeseries, exc)
             continue
-        write_json_atomic(files.metrics, metrics)
+        files.write_metrics(metrics)
         repo.save_progress(run_id, None, metrics)
     if ids:
         log.warning("runs interrupted by the last shutdown: %s", ", ".join(ids))

@@ -19,11 +19,11 @@ and ``field_sigma`` (standard deviation of ``field``, N_y x N_x, K), when the ru
 from __future__ import annotations
 
 import json
-import math
 from typing import Any, Protocol
 
 import numpy as np
 
+from twin.jsonable import finite_or_none
 from twin.model.tables import PARAMETERS
 
 FIELD_DECIMALS = 2  # K; the estimate is not better than 0.01 K, and it keeps frames small
@@ -61,6 +61,8 @@ class SnapshotLike(Protocol):
     @property
     def events(self) -> Any: ...
     @property
+    def blind_since(self) -> float | None: ...  # run time since which no TC reading reached the estimate
+    @property
     def parameters(self) -> Any: ...  # (3,) calibrated deviations or None
     @property
     def parameter_sigma(self) -> Any: ...
@@ -79,13 +81,6 @@ class SnapshotLike(Protocol):
     @property
     def nis(self) -> float | None: ...
 
-
-def finite_or_none(x: Any) -> float | None:
-    """A JSON-safe float: NaN, inf (e.g. a gated or missing TC) and ``None`` (no truth) become ``None``."""
-    if x is None:
-        return None
-    v = float(x)
-    return v if math.isfinite(v) else None
 
 
 def _vector(a: Any, decimals: int = 4) -> list[float | None]:
@@ -187,19 +182,3 @@ def frame_json(s: SnapshotLike, *, run_id: str, seq: int, wall_time: float, stat
     return json.dumps(frame_dict(s, run_id=run_id, seq=seq, wall_time=wall_time, status=status, events=events,
                                  extra=extra), allow_nan=False, separators=(",", ":"))
 
-
-def json_safe(obj: Any) -> Any:
-    """Recursively turn numpy scalars/arrays and non-finite floats into plain JSON values."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, bool | np.bool_):
-        return bool(obj)
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        return finite_or_none(obj)
-    return obj

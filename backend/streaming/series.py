@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from backend.streaming.frames import json_safe
 from twin.control.saturation import bound_flags
 from twin.events import load_changes, load_events
+from twin.jsonable import jsonable
 from twin.model.tables import PARAMETERS
 from twin.physics.fillet import Fillet
 from twin.runs.metrics import windows_of
@@ -116,7 +116,7 @@ def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
     out["windows"] = windows_of(z).to_json()
     out["n_samples"] = n
     out["t_last"] = float(z["t"][-1]) if n else None
-    return json_safe(out)
+    return jsonable(out)
 
 
 def load_series(path: Path, max_points: int = 2000) -> dict[str, Any]:

@@ -23,10 +23,10 @@ from typing import Any
 from backend.core.settings import Settings
 from twin.config import FurnaceConfig
 from twin.limits import scenario_limits
+from twin.runs.folder import write_json
 from twin.studies.cases import Case, expand, resolve_furnace
 from twin.studies.engine import StudyProgress
 from twin.studies.spec import StudyError, StudySpec
-from twin.studies.store import write_json
 
 log = logging.getLogger(__name__)
 

@@ -50,7 +50,7 @@ orig = rec.save_arrays
 def counting(path, arrays, *, compress=True):
     orig(path, arrays, compress=compress); written.append(Path(path).stat().st_size)
 rec.save_arrays = counting
-import backend.storage.run_files as rf; rf.save_arrays = counting
+import twin.runs.folder as rf; rf.save_arrays = counting
 try:
     import twin.runs.series_store as ss; ss.save_arrays = counting
 except ImportError:

@@ -18,8 +18,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from backend.runs.factory import LoopFactory
 from twin.physics.grid import cell_centers
+from twin.runs.outage import run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot  # the real types: the stand-in differs only in physics
+from twin.runs.series_store import SeriesStore
 
 REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault("FURNACE_TWIN_CACHE", str(REPO / ".cache" / "test-radiation"))
@@ -48,6 +51,7 @@ class FakeLoop:
     ref_t0: float = 0.0
     T_start: float = 300.0
     events: list[str] = field(default_factory=list)
+    _series: SeriesStore | None = None
 
     def __post_init__(self) -> None:
         self.reference = self.scenario.reference
@@ -122,6 +126,30 @@ class FakeLoop:
         return {"mean_error_transient_max": max(err) if err else float("nan"),
                 "mean_error_steady_max": float("nan")}
 
+    # the rest of twin.runs.interface.Loop: as a loop on a furnace that takes no faults and never re-plans
+    replanning = False
+
+    @property
+    def t_s(self) -> float:
+        return float(self.cfg.sampling.t_s)
+
+    def set_faults(self, faults: Any) -> None:
+        raise ValueError("faults can be injected only into a simulated furnace")
+
+    def add_event(self, event: Any) -> None:
+        self.record.add_event(event)
+
+    def append_series(self, folder: Path) -> None:
+        if self._series is None:
+            self._series = SeriesStore(Path(folder))
+        self._series.append(self.record)
+
+    def ending(self, end: str, error: str | None = None) -> tuple[str, str | None]:
+        return run_ending(end, error, None, self.t)
+
+    def close(self) -> None:
+        pass
+
 
 def check_fake_reference(cfg: Any, ref: Any) -> None:
     """The fake furnace holds at most 1250 K (the real loop's ``reachable_range``)."""
@@ -130,7 +158,7 @@ def check_fake_reference(cfg: Any, ref: Any) -> None:
         raise ValueError(f"{max(temps):.1f} K is unreachable in the fake furnace (at most 1250 K)")
 
 
-class FakeFactory:
+class FakeFactory(LoopFactory):
     """Makes FakeLoops; like ``DefaultLoopFactory`` it checks a reference before a run starts."""
 
     def __init__(self, step_cost_s: float = 0.0, replan_s: float = 0.0) -> None:

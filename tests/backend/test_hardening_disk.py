@@ -42,7 +42,7 @@ def test_finding_08_series_appended_not_rewritten(tmp_path, small_cfg, monkeypat
 
     monkeypatch.setattr(record_module, "save_arrays", counting)
     monkeypatch.setattr("twin.runs.series_store.save_arrays", counting)
-    monkeypatch.setattr("backend.storage.run_files.save_arrays", counting)
+    monkeypatch.setattr("twin.runs.folder.save_arrays", counting)
     with client(tmp_path, small_cfg, fake_factory(step_cost_s=0.002), flush_interval_s=0.05) as c:
         run_id = c.post("/api/runs", json={"duration": 60.0}).json()["id"]  # 600 samples at speed max
         wait_status(c, run_id, {"finished"})
@@ -177,7 +177,7 @@ import os, sys, time
 from pathlib import Path
 import rerun as rr
 from backend.storage.repository import RunRepository
-from backend.storage.run_files import RunFiles
+from twin.runs.folder import RunFolder
 from backend.storage.recording import RecordingSink
 from twin.config import small_config
 from twin.runs.series_store import SeriesStore
@@ -188,7 +188,7 @@ data = Path({data!r})
 repo = RunRepository(data / "runs.sqlite3")
 sc = Scenario(duration=30.0)
 repo.create_run("crashed00001", sc.to_json(), status="running")
-files = RunFiles(data / "runs" / "crashed00001")
+files = RunFolder(data / "runs" / "crashed00001")
 files.folder.mkdir(parents=True)
 cfg = small_config()
 sink = RecordingSink(cfg, "crashed00001", files.recording, tc_positions=cfg.tc_positions())

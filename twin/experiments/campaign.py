@@ -178,9 +178,10 @@ def run_campaign(
     """
     from twin.experiments.figures import plot_homogeneity_comparison
     from twin.experiments.model_error import open_loop_model_error
-    from twin.experiments.run import _json_safe, execute_run
+    from twin.experiments.run import execute_run
     from twin.furnace.simulated import SimulatedFurnace
     from twin.furnace.simulated.truth import truth_radiation as load_truth_radiation
+    from twin.jsonable import jsonable
     from twin.radiation import radiation_model
     from twin.runs.loop import ClosedLoop
 
@@ -215,8 +216,8 @@ def run_campaign(
                 series[name] = ts
             runs.append({
                 "seed": seed,
-                "metrics": _json_safe({k: v for k, v in result.items() if k not in ("out", "status", "status_reason")}),
-                "model_error": _json_safe(open_loop_model_error(cfg, ts, rad)),
+                "metrics": jsonable({k: v for k, v in result.items() if k not in ("out", "status", "status_reason")}),
+                "model_error": jsonable(open_loop_model_error(cfg, ts, rad)),
                 "out": str(folder),
             })
         experiments.append({

@@ -18,32 +18,22 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 from twin.config import FurnaceConfig
-from twin.furnace.interface import FurnaceLost
+from twin.jsonable import jsonable
 from twin.limits import furnace_name, scenario_limits
+from twin.runs.folder import RunFolder
 from twin.runs.guards import EstimateDiverged
 from twin.runs.loop import ClosedLoop
-from twin.runs.record import Snapshot, save_arrays
+from twin.runs.session import RunSession, SnapshotSink
 from twin.user_files import ScenarioError, load_scenario
 
 log = logging.getLogger(__name__)
-
-
-class SnapshotSink(Protocol):
-    """Consumes snapshots of one run (a rerun recording, a viser scene, ...)."""
-
-    def add(self, snap: Snapshot) -> None: ...
-
-    def flush(self) -> None: ...
-
-    def close(self) -> None: ...
 
 
 SinkFactory = Callable[[Path, ClosedLoop], SnapshotSink]
@@ -57,58 +47,20 @@ def execute_run(
     figures: bool = True,
     flush_every_s: float = 10.0,
 ) -> dict[str, Any]:
-    """Run a loop to the end, writing its data as it goes; returns the metrics with ``out``, ``status`` and
-    ``status_reason`` (also in ``metrics.json``: ``finished``, ``degraded`` when it ended blind, ``plant_lost``
-    with ``error`` if the furnace was lost; the data up to then is written all the same).  A run that fails
-    (the estimate diverged, ...) or is interrupted (Ctrl-C) writes its data and ``metrics.json`` with status
-    ``error`` / ``stopped``, then raises."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scenario.json").write_text(json.dumps(loop.scenario.model_dump(mode="json"), indent=2))
-    sinks = [make(out, loop) for make in sink_factories]
-    flush_every = max(1, int(round(flush_every_s / loop.t_s)))
-    end, error = "finished", None
-    failure: BaseException | None = None
-    try:
-        for snap in loop.run():
-            for sink in sinks:
-                sink.add(snap)
-            if snap.j % flush_every == 0 and snap.j > 0:
-                loop.record.save(out / "timeseries.npz")
-                for sink in sinks:
-                    sink.flush()
-    except FurnaceLost as exc:
-        log.error("the furnace was lost: %s", exc)
-        end, error = "plant_lost", str(exc)
-    except KeyboardInterrupt as exc:
-        end, failure = "stopped", exc
-    except Exception as exc:
-        end, error, failure = "error", f"{type(exc).__name__}: {exc}", exc
-    finally:
-        ts = loop.timeseries()
-        save_arrays(out / "timeseries.npz", ts)
-        for sink in sinks:
-            sink.close()
-        loop.close()
-    status, reason = loop.ending(end, error)
-    metrics = {**loop.metrics(), "status": status, "status_reason": reason}
-    (out / "metrics.json").write_text(json.dumps(_json_safe(metrics), indent=2))
-    if failure is not None:
-        raise failure
-    if figures and len(ts["t"]):
+    """Run a loop to the end in ``out`` (``twin.runs.session.RunSession.run``: its data written as it goes) and
+    plot its figures; returns the metrics with ``out``, ``status`` and ``status_reason`` (also in
+    ``metrics.json``: ``finished``, ``degraded`` when it ended blind, ``plant_lost`` with ``error`` if the furnace
+    was lost; the data up to then is written all the same).  A run that fails (the estimate diverged, ...) or is
+    interrupted (Ctrl-C) writes its data and ``metrics.json`` with status ``error`` / ``stopped``, then raises."""
+    folder = RunFolder(out)
+    session = RunSession(loop, folder, sinks=[make(out, loop) for make in sink_factories])
+    result = session.run(flush_every_s=flush_every_s)
+    if figures and session.latest is not None:
         from twin.experiments.figures import plot_run
+        from twin.runs.record import load_arrays
 
-        plot_run(ts, out)
-    result: dict[str, Any] = {**metrics, "out": str(out)}
-    if error is not None:
-        result["error"] = error
-    return result
-
-
-def _json_safe(d: Any) -> Any:
-    """Metrics as JSON values: NaN / inf (a window the run did not reach) become null, nested too."""
-    if isinstance(d, dict):
-        return {k: _json_safe(v) for k, v in d.items()}
-    return None if isinstance(d, float) and not math.isfinite(d) else d
+        plot_run(load_arrays(folder.timeseries), out)
+    return {**result, "out": str(out)}
 
 
 def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
@@ -145,7 +97,7 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
         return 1
     if args.json:
-        print(json.dumps(_json_safe(result)))  # noqa: T201
+        print(json.dumps(jsonable(result)))  # noqa: T201
     else:
         for k, v in result.items():
             log.info("%-36s %s", k, f"{v:.4f}" if isinstance(v, float) else v)

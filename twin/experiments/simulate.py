@@ -18,7 +18,6 @@ Example
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from collections.abc import Callable
@@ -34,6 +33,7 @@ from twin.config import FurnaceConfig
 from twin.limits import furnace_name, scenario_limits
 from twin.physics.fillet import fillet_box
 from twin.scenario import MAX_DURATION_S, OscillationSpec, parse_oscillation, parse_scenario
+from twin.user_files import read_json
 
 log = logging.getLogger(__name__)
 
@@ -65,11 +65,9 @@ def parse_powers(text: str, n_groups: int) -> Array:
 def load_schedule(path: str, n_groups: int) -> tuple[Array, Array]:
     """Times (k,) and powers (k, n_groups) of a schedule file (see the module docstring)."""
     try:
-        data = json.loads(Path(path).read_text())
-    except OSError as exc:
-        raise SimulateArgumentError(f"--schedule: cannot read {path}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise SimulateArgumentError(f"--schedule: {path} is not valid JSON: {exc}") from None
+        data = read_json(path, "schedule", SimulateArgumentError)
+    except SimulateArgumentError as exc:
+        raise SimulateArgumentError(f"--schedule: {exc}") from None
     if not isinstance(data, list) or not data:
         raise SimulateArgumentError("--schedule: expected a non-empty list [[t, [u1..u6]], ...]")
     times, powers = [], []

@@ -50,6 +50,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,6 +59,7 @@ from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.estimation.consistency import cell_nees
 from twin.estimation.uncertainty import FieldUncertainty
+from twin.events import RunEvent
 from twin.furnace.interface import FaultInjectable, Furnace, Readings, delivered
 from twin.model.tables import Parameters
 from twin.physics.fillet import Fillet
@@ -69,6 +71,7 @@ from twin.runs.live_changes import LiveChanges, _Plan
 from twin.runs.outage import BlindWatch, blind_cause, run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.replanning import Replanner
+from twin.runs.series_store import SeriesStore, parts_dir
 from twin.scenario import OscillationSpec, Reference, Scenario
 
 __all__ = ["ClosedLoop", "Snapshot"]
@@ -183,6 +186,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self.blindness = BlindWatch(self.t_s)  # samples without a reading in the estimate: degraded, and why
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
+        self._series: SeriesStore | None = None  # the parts append_series writes
 
     # ------------------------------------------------------------------ the loop
     @property
@@ -308,3 +312,14 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
 
     def metrics(self) -> dict[str, Any]:
         return self.record.metrics()
+
+    # ------------------------------------------------------------------ for the host (twin.runs.interface.Loop)
+    def add_event(self, event: RunEvent) -> None:
+        """An event of the host's (a change's outcome, the run's end) into the run record."""
+        self.record.add_event(event)
+
+    def append_series(self, folder: Path) -> None:
+        """Append the samples since the last call to the series parts in ``folder`` (``twin.runs.series_store``)."""
+        if self._series is None or self._series.dir != parts_dir(Path(folder)):
+            self._series = SeriesStore(Path(folder))
+        self._series.append(self.record)

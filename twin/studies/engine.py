@@ -20,10 +20,11 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
+from twin.runs.folder import write_json
 from twin.studies.cases import Case, expand
 from twin.studies.cluster import study_client
 from twin.studies.spec import StudySpec
-from twin.studies.store import CaseStore, results_table, write_json, write_results
+from twin.studies.store import CaseStore, results_table, write_results
 from twin.studies.timing import timing_figures
 from twin.studies.worker import CaseTask, run_case
 

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from twin.runs.folder import write_atomic
 from twin.runs.metrics import METRIC_KEYS
 from twin.studies.spec import StudySpec
-from twin.studies.store import write_atomic
 
 REPORT_PERCENTILES = (5, 25, 50, 75, 95)
 

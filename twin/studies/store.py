@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from twin.runs.folder import RunFolder, write_json
 from twin.runs.metrics import METRIC_KEYS
 from twin.studies.cases import Case
 
@@ -29,23 +29,6 @@ RESULTS_PARQUET = "results.parquet"
 RESULTS_CSV = "results.csv"
 #: per-case timing columns of the table (s), from the worker's record
 TIMING_KEYS = ("setup_s", "plan_s", "run_s", "metrics_s")
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write via a temporary file and rename: a reader or a crash never sees half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_json(path: Path, obj: Any) -> None:
-    write_atomic(path, json.dumps(obj, indent=2).encode())
 
 
 class CaseStore:
@@ -86,11 +69,11 @@ class CaseStore:
         stored["scenario"] = json.loads(scenario_json)
         series = rec.get("series")
         if series is not None:
-            folder = self.series_dir(rec["key"])
-            write_atomic(folder / "timeseries.npz", series)
-            write_json(folder / "scenario.json", stored["scenario"])
-            write_json(folder / "metrics.json", rec.get("metrics"))
-            stored["out"] = str(folder)
+            run = RunFolder(self.series_dir(rec["key"]))
+            run.write_timeseries_bytes(series)
+            run.write_scenario(stored["scenario"])
+            write_json(run.metrics, rec.get("metrics"))
+            stored["out"] = str(run.folder)
         write_json(self.record_path(rec["key"]), stored)
         return stored
 

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from twin.config import FurnaceConfig, config_from_dict
+from twin.jsonable import jsonable
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +138,7 @@ def run_case(task: CaseTask, furnace: dict[str, Any]) -> dict[str, Any]:
 def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float) -> None:
     from twin.furnace.simulated import SimulatedFurnace
     from twin.runs.loop import ClosedLoop
+    from twin.runs.session import RunSession
     from twin.scenario import Scenario
 
     try:
@@ -150,15 +152,15 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
                                                                                       truth_radiation=own))
         t2 = time.perf_counter()
         rec["plan_s"] = t2 - t1
+        session = RunSession(loop)  # no folder: the record travels back to the client, which writes it
         try:
             while not loop.done:
-                loop.step()
+                session.step()
         finally:
-            loop.close()
+            session.close()
         t3 = time.perf_counter()
         rec["run_s"] = t3 - t2
-        metrics = loop.metrics()
-        rec["metrics"] = {k: finite_or_none(v) for k, v in metrics.items()}
+        rec["metrics"] = jsonable(loop.metrics())
         if task.keep_series:  # the timeseries.npz layout (product.md); the client writes the file
             buf = io.BytesIO()
             np.savez_compressed(buf, **{k: np.asarray(v) for k, v in loop.timeseries().items()})  # type: ignore[arg-type]
@@ -169,9 +171,3 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
         log.exception("case %s failed", task.key)
         rec["error"] = f"{type(exc).__name__}: {exc}"
 
-
-def finite_or_none(v: Any) -> Any:
-    """A metric for JSON and Parquet: NaN / inf (a window the run did not reach) -> None; others unchanged."""
-    if isinstance(v, (float, np.floating)):
-        return float(v) if np.isfinite(v) else None
-    return v

@@ -1,14 +1,14 @@
-"""A run's live changes: queued from any thread, handed to its loop in the worker thread, settled once.
+"""A run's live changes: queued from any thread, handed to its loop in the run's thread, settled once.
 
-:class:`RunChanges` is the part of :class:`backend.runs.worker.RunWorker` (which mixes it in) that takes
-reference / oscillation / fault changes: :meth:`RunChanges.submit_change` queues one (any thread) and
-returns a future of its outcome; the worker hands the queue to its loop between two samples
-(:meth:`RunChanges._apply_changes`, worker thread).  A loop that re-plans in the background returns a
+:class:`ChangeQueue` takes reference / oscillation / fault changes: :meth:`ChangeQueue.submit` queues one (any
+thread) and returns a future of its outcome; the run's host hands the queue to its loop between two samples
+(:meth:`ChangeQueue.hand_over`, the run's thread).  A loop that re-plans in the background returns a
 future per change (``twin.runs.replanning``): the change is ``pending`` until its plan is in force
 (``applied``, with the run time), and ends ``superseded`` (a later change of the same kind won),
 ``failed`` / ``rejected`` (nothing of it applied: :class:`ChangeRejected`) or ``cancelled`` (the run ended
-first: :class:`ChangeCancelled`); faults apply at once.  Each outcome is written to the change's database
-row and reported as one of the run's events.
+first: :class:`ChangeCancelled`); faults apply at once.  Each outcome goes to the host's ``settled`` (the
+server writes the change's database row) and is reported through its ``event`` as one of the run's events.
+The queue keeps what is in force (:attr:`ChangeQueue.reference`, ``oscillation``, ``faults``).
 """
 
 from __future__ import annotations
@@ -22,19 +22,19 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from backend.storage.repository import RunRepository
-from backend.streaming.frames import SnapshotLike
-from twin.config import FurnaceConfig
 from twin.control.budget import PlanCancelled
+from twin.runs.interface import Loop
 from twin.runs.replanning import Superseded
-from twin.scenario import FaultSpec, OscillationSpec, Reference, describe
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario, describe
 
-if TYPE_CHECKING:
-    from backend.runs.worker import LoopLike
+log = logging.getLogger(__name__)
 
-log = logging.getLogger("backend.runs.worker")  # the worker's log, as before the split
+#: the host's record of a change's outcome: (change id, status, run time in force or None, message or None)
+Settled = Callable[[int, str, float | None, str | None], None]
+#: the host's event of the run: (run time or None for "at the next sample", text, level)
+Event = Callable[[float | None, str, str], None]
 
 
 class ChangeRejected(ValueError):
@@ -55,51 +55,45 @@ class _Change:
     notes: tuple[str, ...] = ()  # feasibility warnings, reported as events when the change applies
 
 
-class RunChanges:
-    """The change queue of a run's worker (``backend.runs.worker.RunWorker`` mixes it in)."""
+class ChangeQueue:
+    """The live changes of one run and what is in force (module docstring)."""
 
-    run_id: str
-    cfg: FurnaceConfig
-    repo: RunRepository
-    loop: LoopLike | None
-    latest: SnapshotLike | None
-    reference: Reference
-    oscillation: OscillationSpec
-    faults: list[FaultSpec]
-    _changes: deque[_Change]
-    _changes_lock: threading.Lock
-    _add_later: Callable[[float | None, str, str], None]  # RunWorker's: an event added at its next step
+    def __init__(self, run_id: str, scenario: Scenario, settled: Settled, event: Event) -> None:
+        self.run_id = run_id
+        self._settled, self._event = settled, event
+        #: in force: the scenario's, then each applied change (faults' ``at`` in run time)
+        self.reference: Reference = scenario.reference
+        self.oscillation: OscillationSpec = scenario.oscillation
+        self.faults: list[FaultSpec] = list(scenario.faults)
+        self._changes: deque[_Change] = deque()
+        self._changes_lock = threading.Lock()
 
-    def submit_change(self, kind: str, value: Any, change_id: int,
-                      notes: tuple[str, ...] = ()) -> concurrent.futures.Future[dict[str, Any]]:
+    def submit(self, kind: str, value: Any, change_id: int,
+               notes: tuple[str, ...] = ()) -> concurrent.futures.Future[dict[str, Any]]:
+        """Queue a change (any thread); the future gives its outcome."""
         fut: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
         with self._changes_lock:
             self._changes.append(_Change(kind, value, change_id, fut, notes))
         return fut
 
-    def _apply_changes(self) -> bool:
-        """Hand the queued changes to the loop; True if one was applied at once (a loop without futures)."""
-        assert self.loop is not None
+    def hand_over(self, loop: Loop, t: float) -> bool:
+        """Hand the queued changes to the loop (the run's thread), ``t`` the first sample that could use them;
+        True if one was applied at once (a loop without futures)."""
         applied = False
         while True:
             with self._changes_lock:
                 if not self._changes:
                     return applied
                 ch = self._changes.popleft()
-            # the first sample that could use the change
-            t = float(self.latest.t) + self.cfg.sampling.t_s if self.latest is not None else 0.0
             t0 = time.monotonic()
             try:
                 if ch.kind == "reference":
-                    fut = self.loop.set_reference(ch.value)
+                    fut = loop.set_reference(ch.value)
                 elif ch.kind == "faults":
-                    set_faults = getattr(self.loop, "set_faults", None)
-                    if not callable(set_faults):
-                        raise ValueError("faults can be injected only into a simulated furnace")
-                    set_faults(ch.value)
+                    loop.set_faults(ch.value)
                     fut = None  # in the furnace from the next sample on
                 else:
-                    fut = self.loop.set_oscillation(ch.value)
+                    fut = loop.set_oscillation(ch.value)
             except Exception as exc:  # refused or failed before anything changed: the run goes on as it was
                 self._settle(ch, t0, exc=exc, t=t)
                 continue
@@ -128,35 +122,36 @@ class RunChanges:
             replan_s = time.monotonic() - t0
             log.info("run %s: %s change %d in force from t=%.1f s (%.2f s after it was handed over)",
                      self.run_id, ch.kind, ch.change_id, t, replan_s)
-            self.repo.finish_change(ch.change_id, "applied", t, None)
+            self._settled(ch.change_id, "applied", t, None)
             for note in ch.notes:
-                self._add_later(t, f"feasibility: {note}", "warn")
+                self._event(t, f"feasibility: {note}", "warn")
             ch.future.set_result({"status": "applied", "applied_t": t, "replan_s": replan_s})
             return
         what = f"{ch.kind} change to {describe(ch.value)}"
         if isinstance(exc, Superseded):
-            self.repo.finish_change(ch.change_id, "superseded", None, str(exc))
-            self._add_later(None, f"{what} superseded: {exc}", "info")
+            self._settled(ch.change_id, "superseded", None, str(exc))
+            self._event(None, f"{what} superseded: {exc}", "info")
             ch.future.set_result({"status": "superseded", "applied_t": None, "message": str(exc)})
         elif isinstance(exc, PlanCancelled):
-            self.repo.finish_change(ch.change_id, "cancelled", None, str(exc))
-            self._add_later(None, f"{what} cancelled: {exc}", "warn")
+            self._settled(ch.change_id, "cancelled", None, str(exc))
+            self._event(None, f"{what} cancelled: {exc}", "warn")
             ch.future.set_exception(ChangeCancelled(str(exc)))
         elif isinstance(exc, ValueError):  # unreachable, or beyond this server's plan limits
-            self.repo.finish_change(ch.change_id, "rejected", t, str(exc))
-            self._add_later(t, f"{what} refused: {exc}", "warn")
+            self._settled(ch.change_id, "rejected", t, str(exc))
+            self._event(t, f"{what} refused: {exc}", "warn")
             ch.future.set_exception(ChangeRejected(str(exc)))
         else:  # the solve failed: the run goes on with its old plan
             log.warning("run %s: %s change %d failed: %r", self.run_id, ch.kind, ch.change_id, exc)
             message = f"re-planning failed, the run goes on as before: {exc}"
-            self.repo.finish_change(ch.change_id, "failed", None, message)
-            self._add_later(t, f"{what}: {message}", "error")
+            self._settled(ch.change_id, "failed", None, message)
+            self._event(t, f"{what}: {message}", "error")
             ch.future.set_exception(ChangeRejected(message))
 
-    def cancel_changes(self, reason: str) -> None:
+    def cancel_all(self, reason: str) -> None:
+        """The run ended: every change still queued is cancelled."""
         with self._changes_lock:
             pending, self._changes = list(self._changes), deque()
         for ch in pending:
-            self.repo.finish_change(ch.change_id, "cancelled", None, reason)
-            self._add_later(None, f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
+            self._settled(ch.change_id, "cancelled", None, reason)
+            self._event(None, f"{ch.kind} change to {describe(ch.value)} cancelled: {reason}", "warn")
             ch.future.set_exception(ChangeCancelled(reason))
