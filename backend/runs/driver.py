@@ -106,10 +106,11 @@ class RunDriver:
                 w.notes = await self.checks.start(w.scenario)
             self._set_status(run_id, run, "starting")
             await aio.run_in_executor(run.executor, w.build)
-            self._set_status(run_id, run, "running")
             while True:
                 adv = await aio.run_in_executor(run.executor, w.advance, ADVANCE_BUDGET_S)
                 now = time.monotonic()
+                if run.status == "starting" and w.latest is not None:  # running = its samples come (issue 27)
+                    self._set_status(run_id, run, "running")
                 if run.status in (RUNNING, DEGRADED):  # degraded while no TC reading reaches the estimate
                     run.status = DEGRADED if getattr(w.latest, "blind_since", None) is not None else RUNNING
                 if every_sample:  # the samples come slower than the frame cap: send each one

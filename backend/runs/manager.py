@@ -201,8 +201,13 @@ class RunManager(RunDriver):
         cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
-        if run.status not in ("starting", "running", DEGRADED) or run.worker.stop_requested.is_set():
-            raise RunNotActive(f"run {run_id} is {run.status}")
+        if run.status not in ("running", DEGRADED) or run.worker.stop_requested.is_set() or run.worker.latest is None:
+            # queued / starting: no estimate yet to check a change from, and no plan to change (issue 27: a change
+            # sent while starting was applied at t = 7.6 s without the feasibility check of a start)
+            state = "stopping" if run.worker.stop_requested.is_set() else run.status
+            why = ": live changes are taken once it runs (from its first sample on)" \
+                if state in ("queued", "starting", "running") else ""
+            raise RunNotActive(f"run {run_id} is {state}{why}")
         notes: tuple[str, ...] = ()
         if kind == "reference":  # from the current estimate: the mean now, from the next sample on
             w, snap = run.worker, run.worker.latest
