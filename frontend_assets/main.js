@@ -4,6 +4,7 @@ import { api, forgetOldToken, token } from "./api.js";
 import { render, startRendering } from "./charts.js";
 import { refreshComparison, startComparing } from "./compare.js";
 import { initEstimatorCharts } from "./estimators.js";
+import { wireEventFilter } from "./events.js";
 import { wireFaults } from "./faults.js";
 import { wireForms } from "./forms.js";
 import { wireHelp } from "./glossary.js";
@@ -78,6 +79,7 @@ async function init() {
   }
   wireHelp();
   $("radiation-retry").addEventListener("click", retryRadiation);
+  wireEventFilter();
   initEstimatorCharts();
   wireForms();
   initStudies();

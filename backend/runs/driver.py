@@ -77,7 +77,8 @@ class RunDriver:
         first = run.sent_events
         new = w.events[first:]
         run.sent_events = first + len(new)
-        log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(new)]
+        log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level,
+                        "kind": e.kind} for k, e in enumerate(new)]
         return frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=status,
                           events=[e.text for e in new], extra={"event_log": log_entries, **frame_extra(snap, w.fillet)})
 

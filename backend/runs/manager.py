@@ -201,9 +201,12 @@ class RunManager(RunDriver):
         cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
-        if run.status not in ("running", DEGRADED) or run.worker.stop_requested.is_set() or run.worker.latest is None:
-            # queued / starting: no estimate yet to check a change from, and no plan to change (issue 27: a change
-            # sent while starting was applied at t = 7.6 s without the feasibility check of a start)
+        live = ("starting", "running", DEGRADED) if kind == "faults" else ("running", DEGRADED)
+        no_sample = kind != "faults" and run.worker.latest is None
+        if run.status not in live or run.worker.stop_requested.is_set() or no_sample:
+            # a reference / oscillation while queued / starting: no estimate yet to check it from, and no plan to
+            # change (issue 27: one sent while starting was applied at t = 7.6 s without the start's feasibility
+            # check); faults apply to the furnace at once, from the start
             state = "stopping" if run.worker.stop_requested.is_set() else run.status
             why = ": live changes are taken once it runs (from its first sample on)" \
                 if state in ("queued", "starting", "running") else ""

@@ -105,7 +105,8 @@ def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
         out["t_field"], out["inhomogeneity"], out["spread"] = tf[fidx], sup[fidx], spread[fidx]
         out["field"] = np.asarray(z["field_hat"][-1], dtype=float)
     out.update(estimator_series(z, idx))
-    out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(load_events(z))]
+    out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level, "kind": e.kind}
+                     for k, e in enumerate(load_events(z))]
     out["changes"] = [{"t": c.t, "kind": c.kind, "body": c.body} for c in load_changes(z)]
     out["windows"] = windows_of(z).to_json()
     out["n_samples"] = n

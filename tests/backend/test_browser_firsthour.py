@@ -130,3 +130,51 @@ def test_a_new_run_starts_empty_and_takes_changes_once_it_runs(server, browser, 
     page.wait_for_function("state.run && state.run.status === 'stopped'", timeout=120_000)
     assert not errors, errors
     page.close()
+
+
+def test_the_events_tell_what_happened_with_a_severity_filter(server, browser, artifacts) -> None:
+    """A heat-up with a live reference change: the list reads as what happened (start, change, end first; lamp
+    groups only for a spell that mattered, in plain words); the filter narrows it; the report lists every
+    change and warning."""
+    page, errors = _open(browser, server.url)
+    run_id = _start(page, 800.0, 20.0, 120.0, "2")
+    page.wait_for_function("state.run && state.run.status === 'running' && !document.getElementById('ref-btn')"
+                           ".disabled", timeout=180_000)
+    page.check("input[name=live-refmode][value=transition]")
+    page.fill("#new-setpoint", "1000")
+    page.fill("#new-tE", "20")
+    page.click("#ref-btn")
+    page.wait_for_function("document.getElementById('ctl-msg').textContent.includes('applied at t =')",
+                           timeout=120_000)
+    page.wait_for_function("state.run && state.run.status === 'finished' && !state.loading", timeout=240_000)
+    page.wait_for_timeout(1500)
+    texts = page.evaluate("[...document.querySelectorAll('#event-log li:not(.empty)')].map((li) => li.textContent)")
+    every = httpx.get(f"{server.url}/api/runs/{run_id}/series", timeout=30).json()["events"]
+    assert len(texts) == len(every) > 2
+    assert texts[-1].endswith(every[0]["text"]) and every[0]["kind"] == "run_started"
+    assert every[-1]["kind"] == "run_ended" and every[-1]["text"] == "run finished"
+    assert not [e for e in every if "no headroom left to cool" in e["text"] or "off (0 %)" in e["text"]]
+    for e in every:
+        if e["kind"] == "saturation":  # a spell that mattered says its effect
+            assert "the fillet mean" in e["text"], e
+    assert not any("cannot explain the TCs" in e["text"] for e in every)
+    _screenshot(page, artifacts, "firsthour-events-all.png")
+
+    page.select_option("#event-filter", "changes")
+    changes = page.evaluate("[...document.querySelectorAll('#event-log li:not(.empty)')].map((li) => li.textContent)")
+    assert any("reference changed at t =" in t for t in changes), changes
+    assert any(t.endswith("run finished") for t in changes) and any("run started" in t for t in changes)
+    assert len(changes) < len(texts) or all(e["level"] != "info" for e in every[1:-1])
+    page.select_option("#event-filter", "warn")
+    warned = page.evaluate("[...document.querySelectorAll('#event-log li:not(.empty)')].map((li) => li.className)")
+    assert all(c in ("warn", "error") for c in warned), warned
+    assert len(warned) == sum(e["level"] in ("warn", "error") for e in every)
+    page.select_option("#event-filter", "all")
+
+    report = httpx.get(f"{server.url}/api/runs/{run_id}/report.png", timeout=120)
+    assert report.status_code == 200
+    (artifacts / "firsthour-report.png").write_bytes(report.content)
+    if SCREENS.is_dir():
+        (SCREENS / "firsthour-report.png").write_bytes(report.content)
+    assert not errors, errors
+    page.close()
