@@ -170,7 +170,8 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     ax.axis("off")
     events = load_events(ts)
     shown = report_events(events)
-    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", 110) for e in shown]
+    width = 160 if len(shown) <= 8 else 95  # one column, else two side by side
+    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", width) for e in shown]
     left_out = len(events) - len(shown)
     more = f" ({left_out} other information events in the run's files)" if left_out else ""
     heading = f"the start, every change and every warning{more}:"
