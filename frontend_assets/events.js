@@ -20,12 +20,33 @@ export function addEvents(events) {
   if (added) render();
 }
 
+// The severity filter: every event, the start / end / changes / warnings (what the report lists), or warnings
+const CHANGE = /^run (started|finished|stopped|interrupted|failed|lost|ended)|^fault injected|^faults cleared|reference changed at|oscillation (on|off) at|calibration at/;
+const FILTERS = {
+  all: () => true,
+  changes: (e) => (e.level && e.level !== "info") || CHANGE.test(e.text),
+  warn: (e) => e.level === "warn" || e.level === "error",
+};
+
+export function wireEventFilter() {
+  const el = $("event-filter");
+  try { el.value = localStorage.getItem("furnace-twin-event-filter") || "all"; } catch (e) { /* default */ }
+  if (!FILTERS[el.value]) el.value = "all";
+  el.addEventListener("change", () => {
+    try { localStorage.setItem("furnace-twin-event-filter", el.value); } catch (e) { /* not kept */ }
+    render();
+  });
+}
+
 function render() {
   const log = $("event-log");
-  const all = [...state.events.values()].sort((a, b) => b.n - a.n);
-  $("event-count").textContent = all.length ? `· ${all.length}` : "";
+  const every = [...state.events.values()].sort((a, b) => b.n - a.n);
+  const keep = FILTERS[$("event-filter").value] || FILTERS.all;
+  const all = every.filter(keep);
+  $("event-count").textContent = every.length ? (all.length === every.length ? `· ${every.length}` : `· ${all.length} of ${every.length}`) : "";
   if (!all.length) {
-    log.innerHTML = '<li class="empty muted">events of the shown run appear here</li>';
+    log.innerHTML = every.length ? '<li class="empty muted">none of this kind (see the filter)</li>'
+      : '<li class="empty muted">events of the shown run appear here</li>';
     return;
   }
   log.replaceChildren(...all.slice(0, SHOWN).map((e) => {

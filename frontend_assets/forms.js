@@ -76,7 +76,10 @@ async function startRun(ev) {
     if (lastStart) lastStart.at = Date.now();
     const again = created.replayed ? " (already started: the same request came twice)" : "";
     const warn = created.warnings && created.warnings.length ? ` · warning: ${created.warnings[0]}` : "";
-    showMsg(`run ${created.id} started${again}: reference ${describeReference(scenario.reference)}${warn}`,
+    // every run is queued for a moment; it waits only while the radiation model loads
+    const waits = created.status === "queued" && state.health && state.health.radiation !== "ready";
+    const how = waits ? "queued (it starts when the radiation model is ready)" : "started";
+    showMsg(`run ${created.id} ${how}${again}: reference ${describeReference(scenario.reference)}${warn}`,
       warn ? "warn" : false, "start-msg");
     btn.disabled = false; // the reply is in: a click from now on is a new request (or the same, if repeated)
     if (state.runId !== created.id) selectRun(created.id);

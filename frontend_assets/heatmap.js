@@ -40,6 +40,15 @@ export function fieldLayout(xTitle, frame) {
   };
 }
 
+// What a going run without a frame yet waits for (null once it has one, or for a run that ended)
+function waitingFor(run) {
+  if (!run || state.lastFrame) return null;
+  if (run.status === "queued") return "queued: waiting for the radiation model …";
+  if (run.status === "starting") return "planning the first trajectory …";
+  if (run.status === "running") return "waiting for the first sample …";
+  return null;
+}
+
 export function heatmapFigure() {
   const fu = state.furnace, s = state.series;
   const [x0, , , y1] = fu.fillet;
@@ -57,6 +66,11 @@ export function heatmapFigure() {
   const annotations = tcx.map((x, i) => ({ ...LABEL, ...place[i], x, y: tcy[i],
     text: `TC${i + 1}${i === 3 ? " (val.)" : ""}${tc[i] === null || tc[i] === undefined ? "" : ` ${fmt(tc[i])} K`}` }));
   annotations.push({ ...LABEL, x: x0, y: y1, xanchor: "left", yanchor: "top", xshift: 3, yshift: -3, text: "fillet" });
+  const waiting = waitingFor(state.run);
+  if (!z && waiting) {
+    $("heat-sub").textContent = waiting;
+    annotations.push({ ...LABEL, x: fu.L_s / 2, y: fu.W_s / 2, font: { color: "#fff", size: 14 }, borderpad: 6, text: waiting });
+  }
   return {
     data: [
       sigma || { type: "heatmap", x: fu.x, y: fu.y, z: z || [[null]], colorscale: TURBO, zsmooth: "best", zmin, zmax, zauto: zmin === undefined,

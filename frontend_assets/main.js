@@ -5,6 +5,7 @@ import { refreshCalibration, wireCalibration } from "./calibration.js";
 import { render, startRendering } from "./charts.js";
 import { refreshComparison, startComparing } from "./compare.js";
 import { initEstimatorCharts } from "./estimators.js";
+import { wireEventFilter } from "./events.js";
 import { wireFaults } from "./faults.js";
 import { wireForms } from "./forms.js";
 import { wireHelp } from "./glossary.js";
@@ -81,6 +82,7 @@ async function init() {
   wireHelp();
   $("radiation-retry").addEventListener("click", retryRadiation);
   wireCalibration();
+  wireEventFilter();
   initEstimatorCharts();
   wireForms();
   initStudies();

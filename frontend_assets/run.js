@@ -1,6 +1,7 @@
 // The shown run: its card (what it is, files, metrics), the live controls, and its history: a page that
 // connects to a running run reads everything so far (GET .../series), then continues with the stream.
 import { api } from "./api.js";
+import { render } from "./charts.js";
 import { describeChoice, setEstimatorForm } from "./estimatorform.js";
 import { addEvents, clearEvents, noteStatus } from "./events.js";
 import { setLiveOscillation } from "./inputs.js";
@@ -12,10 +13,18 @@ import { state } from "./state.js";
 import { applyFrame, closeStream, connectStream } from "./stream.js";
 import { renderFaults } from "./faults.js";
 
-// The live controls act on the shown run only while it runs.
+// The live controls act on the shown run: Stop while it is going, changes only once it runs (the server answers
+// 409 while it is queued or starting: there is no estimate to check a change from yet).
+export function changeable(run) {
+  return !!run && ["running", "degraded"].includes(run.status) && !run.ended_at && !!run.latest;
+}
+
 function setControls(run) {
-  const live = going(run);
-  for (const id of ["ref-btn", "osc-btn", "stop-btn"]) $(id).disabled = !live;
+  $("stop-btn").disabled = !going(run);
+  for (const id of ["ref-btn", "osc-btn"]) {
+    $(id).disabled = !changeable(run);
+    $(id).title = changeable(run) ? "" : (going(run) ? "live changes are taken once the run runs (its first sample)" : "");
+  }
   $("ctl-run").textContent = run ? `· ${run.label || run.id}` : "";
   setLiveOscillation(run ? run.oscillation : null);
 }
@@ -105,10 +114,11 @@ export async function refreshRun(quiet = false) {
 }
 
 // Everything so far: the stored (or live) series with its events, then the frames that came meanwhile.
-async function loadHistory(runId) {
+async function loadHistory(runId, keep = false) {
   try {
     const d = await api("GET", `/api/runs/${runId}/series`);
     if (state.runId !== runId) return;
+    if (keep) clearEvents(); // the history brings every event again
     state.series = seriesFromStored(d);
     state.series.windows = d.windows;
     state.historyEnd = d.t_last; // the last sample the history brought; the stream continues after it
@@ -121,17 +131,25 @@ async function loadHistory(runId) {
   }
 }
 
+// Show a run.  Another run's view is emptied at once (a new run reads "planning ..." until its first frame, never
+// the previous run's heat map and clock); the same run again (its stream ended) keeps its charts until the stored
+// history replaces them, so they do not blank when a run ends.
 export async function selectRun(runId) {
   closeStream();
-  Object.assign(state, { runId, series: emptySeries(), lastFrame: null, frames: 0, run: null, lastStatus: null,
-    oscShown: null, loading: true, held: [] });
-  clearEvents();
+  const keep = state.runId === runId && !!state.run;
+  Object.assign(state, { runId, lastStatus: null, oscShown: null, loading: true, held: [] });
+  if (!keep) {
+    Object.assign(state, { series: emptySeries(), lastFrame: null, frames: 0, run: null });
+    clearEvents();
+    $("run-clock").textContent = "";
+    render(); // at once: the previous run's heat map and charts must not stay up under the new run's name
+  }
   markShown();
   await refreshRun(true);
   const run = state.run;
   if (!run || run.id !== runId) return;
   if (going(run)) await connectStream(runId, () => { selectRun(runId); refreshRuns(); }); // frames wait
-  await loadHistory(runId);
+  await loadHistory(runId, keep);
   if (state.runId !== runId) return;
   state.loading = false;
   for (const f of state.held.splice(0)) applyFrame(f); // only those after the history's last sample count

@@ -78,7 +78,8 @@ class RunDriver:
         first = run.sent_events
         new = w.events[first:]
         run.sent_events = first + len(new)
-        log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(new)]
+        log_entries = [{"n": first + k, "t": e.t, "text": e.text, "level": e.level,
+                        "kind": e.kind} for k, e in enumerate(new)]
         return frame_json(snap, run_id=run_id, seq=seq, wall_time=wall, status=status,
                           events=[e.text for e in new], extra={"event_log": log_entries, **frame_extra(snap, w.fillet)})
 
@@ -107,10 +108,11 @@ class RunDriver:
                 w.notes = await self.checks.start(w.scenario)
             self._set_status(run_id, run, "starting")
             await aio.run_in_executor(run.executor, w.build)
-            self._set_status(run_id, run, "running")
             while True:
                 adv = await aio.run_in_executor(run.executor, w.advance, ADVANCE_BUDGET_S)
                 now = time.monotonic()
+                if run.status == "starting" and w.latest is not None:  # running = its samples come (issue 27)
+                    self._set_status(run_id, run, "running")
                 if run.status in (RUNNING, DEGRADED):  # degraded while no TC reading reaches the estimate
                     blind = w.latest is not None and w.latest.blind_since is not None
                     run.status = DEGRADED if blind else RUNNING

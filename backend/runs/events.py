@@ -11,11 +11,10 @@ from __future__ import annotations
 from collections import deque
 
 from twin.control.saturation import SaturationWatch
+from twin.event_words import END_WORDS
 from twin.events import RunEvent
 
-#: what a run's own end is called in its events
-END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
-             "error": "run failed", "plant_lost": "run lost its furnace", "degraded": "run ended blind"}
+__all__ = ["END_WORDS", "RunEvents", "end_event"]
 
 
 def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
@@ -28,11 +27,9 @@ def end_event(status: str, t: float, error: str | None = None) -> RunEvent:
     >>> end_event("degraded", 240.0, "blind from t = 197.0 s to the end").level
     'warn'
     """
-    words = END_WORDS.get(status, f"run {status}")
-    at = f" at t = {t:.1f} s" if status != "finished" else ""
     level = "error" if status in ("error", "plant_lost") else ("warn" if status in ("interrupted", "degraded")
                                                                else "info")
-    return RunEvent(float(t), f"{words}{at}{f': {error}' if error else ''}", level)
+    return RunEvent(float(t), "run_ended", level, {"status": status, "error": error})
 
 
 class RunEvents:

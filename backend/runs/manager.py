@@ -208,8 +208,16 @@ class RunManager(RunDriver):
         cannot follow, before it reaches the run."""
         run = self._active(run_id)
         self.checks.change_limits(value)
-        if run.status not in ("starting", "running", DEGRADED) or run.worker.stop_requested.is_set():
-            raise RunNotActive(f"run {run_id} is {run.status}")
+        live = ("starting", "running", DEGRADED) if kind == "faults" else ("running", DEGRADED)
+        no_sample = kind != "faults" and run.worker.latest is None
+        if run.status not in live or run.worker.stop_requested.is_set() or no_sample:
+            # a reference / oscillation while queued / starting: no estimate yet to check it from, and no plan to
+            # change (issue 27: one sent while starting was applied at t = 7.6 s without the start's feasibility
+            # check); faults apply to the furnace at once, from the start
+            state = "stopping" if run.worker.stop_requested.is_set() else run.status
+            why = ": live changes are taken once it runs (from its first sample on)" \
+                if state in ("queued", "starting", "running") else ""
+            raise RunNotActive(f"run {run_id} is {state}{why}")
         notes: tuple[str, ...] = ()
         if kind == "reference":  # from the current estimate: the mean now, from the next sample on
             w, snap = run.worker, run.worker.latest

@@ -37,7 +37,7 @@ from backend.storage.repository import RunRepository
 from backend.streaming.frames import SnapshotLike, events_of, scalar_values
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget, PlanCancelled
-from twin.events import RunEvent, event_arrays, event_level
+from twin.events import RunEvent, event_arrays
 from twin.physics.fillet import Fillet
 from twin.runs.changes import ChangeQueue
 from twin.runs.folder import RunFolder
@@ -131,10 +131,13 @@ class RunWorker:
         return self.changes.faults
 
     # ---- events ----
-    def add_event(self, t: float, text: str, level: str = "info", *, in_record: bool = False) -> None:
-        """One report of the run (worker thread): kept for the stream, the run record (``in_record``: the loop
+    def add_event(self, t: float, text: str, level: str | None = None, *, in_record: bool = False) -> None:
+        """A sentence of the run (worker thread): a ``said`` event (:meth:`add`)."""
+        self.add(RunEvent.said(float(t), text, level), in_record=in_record)
+
+    def add(self, event: RunEvent, *, in_record: bool = False) -> None:
+        """One event of the run (worker thread): kept for the stream, the run record (``in_record``: the loop
         put it there already) and the recording."""
-        event = RunEvent(float(t), text, level)
         self.events.append(event)
         if not in_record and self.loop is not None:
             self.loop.add_event(event)
@@ -144,11 +147,11 @@ class RunWorker:
     def _add_later(self, t: float | None, text: str, level: str) -> None:
         """An event from another thread (a change settled by the re-planning thread): added at the next step."""
         at = t if t is not None else (float(self.latest.t) if self.latest is not None else 0.0)
-        self._events.later(RunEvent(float(at), text, level))
+        self._events.later(RunEvent.said(float(at), text, level))
 
     def _add_queued(self) -> None:
         for e in self._events.queued():
-            self.add_event(e.t, e.text, e.level)
+            self.add(e)
 
     # ---- set-up (worker thread) ----
     def build(self) -> None:
@@ -165,10 +168,11 @@ class RunWorker:
             raise PlanCancelled("the run was stopped while it was starting")
         sc = self.scenario
         speed = "as fast as possible" if sc.speed == "max" else f"{float(sc.speed):g} x real time"
-        self.add_event(0.0, f"run started: reference {describe(sc.reference)}, oscillation "
-                            f"{describe(sc.oscillation)}, {sc.duration:g} s, {speed}")
+        self.add(RunEvent(0.0, "run_started", "info", {
+            "reference": describe(sc.reference), "oscillation": describe(sc.oscillation),
+            "duration": float(sc.duration), "speed": speed}))
         for note in self.notes:
-            self.add_event(0.0, f"feasibility: {note}", "warn")
+            self.add(RunEvent(0.0, "feasibility", "warn", {"note": note}))
         self._rebase(0.0)
         self._last_flush = time.monotonic()
 
@@ -220,11 +224,12 @@ class RunWorker:
             samples.append((snap, self.seq, self.latest_wall))
             self._add_queued()
             for text in events_of(snap.events):  # the loop put them into its record with the sample
-                self.add_event(float(snap.t), text, event_level(text), in_record=True)
+                self.add_event(float(snap.t), text, in_record=True)
                 if text.startswith(FAULT_EVENT_PREFIXES):
                     self.fault_events.append({"t": float(snap.t), "text": text})
-            for event in self._events.saturation.update(float(snap.t), snap.u):
-                self.add_event(event.t, event.text, event.level)
+            error = float(snap.T_ref) - float(snap.T_mean_hat)  # behind the reference: > 0
+            for event in self._events.saturation.update(float(snap.t), snap.u, error):
+                self.add(event)
             wait = 0.0
             if time.monotonic() - start >= budget_s:
                 break
@@ -298,9 +303,10 @@ class RunWorker:
         if status is not None:
             self.ending = self._ending(status, error)
             final, reason = self.ending
-            end = end_event(final, float(self.latest.t) if self.latest is not None else 0.0,
-                            reason if final == "degraded" else error)
-            self.add_event(end.t, end.text, end.level)
+            t_end = float(self.latest.t) if self.latest is not None else 0.0
+            for spell in self._events.saturation.flush(t_end):  # spells still open at the end
+                self.add(spell)
+            self.add(end_event(final, t_end, reason if final == "degraded" else error))
         metrics = self.session.metrics() if self.session is not None else None
         if metrics is not None:
             if self.ending is not None:

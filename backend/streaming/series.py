@@ -111,7 +111,8 @@ def series_json(z: Mapping[str, Any], max_points: int = 2000) -> dict[str, Any]:
     if "sigma_mean" in z and len(z["sigma_mean"]):
         out["sigma_mean"] = np.asarray(z["sigma_mean"], dtype=float)[idx]
     out.update(estimator_series(z, idx))
-    out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level} for k, e in enumerate(load_events(z))]
+    out["events"] = [{"n": k, "t": e.t, "text": e.text, "level": e.level, "kind": e.kind}
+                     for k, e in enumerate(load_events(z))]
     out["changes"] = [{"t": c.t, "kind": c.kind, "body": c.body} for c in load_changes(z)]
     out["windows"] = windows_of(z).to_json()
     out["n_samples"] = n

@@ -90,6 +90,11 @@ def test_a_run_stopped_while_queued_ends_stopped(tmp_path, small_cfg, gated_radi
     app = create_app(Settings(data_dir=tmp_path), small_cfg, loop_factory=DefaultLoopFactory())
     with TestClient(app, base_url="http://127.0.0.1") as c:
         run_id = c.post("/api/runs", json={"duration": 1.0}).json()["id"]
+        # no live change while queued: nothing to check it from yet (issue 27: one sent while starting was applied
+        # without the feasibility check of a start)
+        change = c.put(f"/api/runs/{run_id}/reference", json={"setpoint": 1050.0, "t_E": 30.0})
+        assert change.status_code == 409, change.text
+        assert "is queued: live changes are taken once it runs" in change.text, change.text
         assert c.post(f"/api/runs/{run_id}/stop").status_code == 202
         body = wait_status(c, run_id, {"stopped", "error", "finished"}, timeout=30)
         assert body["status"] == "stopped", body

@@ -228,7 +228,7 @@ def test_the_record_keeps_events_and_changes_through_save_and_load(tmp_path):
     from twin.events import RunChange, RunEvent, change_arrays, event_arrays, load_changes, load_events
     from twin.runs.record import load_arrays, save_arrays
 
-    events = [RunEvent(0.0, "run started"), RunEvent(12.5, "T2v at full power", "warn")]
+    events = [RunEvent.said(0.0, "run started"), RunEvent.said(12.5, "T2v at full power", "warn")]
     changes = [RunChange(10.1, "reference", {"points": [[1.0, 900.0]]})]
     save_arrays(tmp_path / "ts.npz", {"t": np.zeros(1), **event_arrays(events), **change_arrays(changes)})
     back = load_arrays(tmp_path / "ts.npz")

@@ -169,11 +169,39 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     ax = fig.add_subplot(grid[3, :])
     ax.axis("off")
     events = load_events(ts)
-    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", 150) for e in events[-6:]]
-    more = f" (the last 6 of {len(events)})" if len(events) > 6 else ""
-    ax.text(0, 1, f"events{more}:\n" + ("\n".join(lines) if lines else "none recorded"), fontsize=7,
-            family="monospace", va="top")
+    shown = report_events(events)
+    width = 160 if len(shown) <= 8 else 95  # one column, else two side by side
+    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", width) for e in shown]
+    left_out = len(events) - len(shown)
+    more = f" ({left_out} other information events in the run's files)" if left_out else ""
+    heading = f"the start, every change and every warning{more}:"
+    if not lines:
+        ax.text(0, 1, f"{heading}\nnone recorded", fontsize=7, family="monospace", va="top")
+    half = (len(lines) + 1) // 2 if len(lines) > 8 else len(lines)
+    size = 7 if len(lines) <= 16 else max(4.5, 7 * 16 / len(lines))
+    for col, chunk in enumerate((lines[:half], lines[half:])):
+        if chunk:
+            ax.text(0.5 * col, 1, (heading if col == 0 else "") + "\n" + "\n".join(chunk), fontsize=size,
+                    family="monospace", va="top")
     return fig
+
+
+def report_events(events: list[Any]) -> list[Any]:
+    """What the report lists: the run's start and end, every live change and every warning or error (issue 27:
+    "the last 6 of 24" dropped the reference change); lamp spells and the loop's information stay in the files.
+
+    >>> from twin.events import RunEvent
+    >>> ev = [RunEvent.said(0, "run started: x"), RunEvent.said(1, "re-planned (osc): ok"),
+    ...       RunEvent.said(5, "re-planned (reference changed at t = 5.0 s to 1050 K in 30 s): ok"),
+    ...       RunEvent.said(9, "x failed")]
+    >>> [e.t for e in report_events(ev)]
+    [0.0, 5.0, 9.0]
+    """
+    starts = ("run started", "run finished", "run stopped", "run interrupted", "run failed", "run lost",
+              "run ended", "fault injected", "faults cleared")
+    changes = ("reference changed at", "oscillation on at", "oscillation off at", "calibration at")
+    return [e for e in events if e.level != "info" or e.kind in ("run_started", "run_ended")
+            or e.text.startswith(starts) or any(c in e.text for c in changes)]
 
 
 def write_report(ts: Mapping[str, Any], metrics: Mapping[str, Any], out: IO[bytes], *, fmt: str = "pdf",

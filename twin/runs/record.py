@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.events import RunChange, RunEvent, change_arrays, event_arrays, event_level
+from twin.events import RunChange, RunEvent, change_arrays, event_arrays
 
 Array = NDArray[np.float64]
 
@@ -246,7 +246,7 @@ class RunRecord:
                                               self.capacity[1])
             for k, v in fields_now.items():
                 self._fields[k].append(v)
-        self._events.extend(RunEvent(float(snap.t), str(e), event_level(str(e))) for e in snap.events)
+        self._events.extend(RunEvent.said(float(snap.t), str(e)) for e in snap.events)
 
     def note_change(self, t: float, kind: str, body_json: str) -> None:
         """Record a live change (``ClosedLoop.set_reference`` / ``set_oscillation``) that applies from ``t``;
