@@ -9,15 +9,30 @@ const TURBO = [[0, "#30123b"], [0.1, "#4145ab"], [0.2, "#4675ed"], [0.3, "#39a2f
 const KEY = "furnace-twin-heat-scale";
 const LABEL = { bgcolor: "rgba(20, 26, 38, 0.78)", font: { color: "#fff", size: 10.5 }, borderpad: 2, showarrow: false };
 
-export const heat = { mode: "auto", lo: null, hi: null };
+// "fillet" (the default): the colours span the fillet's own temperatures, so its spread shows (the cold edges
+// saturate at the low end; issue 27: an automatic 600-1100 K scale made the fillet one flat colour); "auto": the
+// whole specimen; "fixed": lowest and highest K as entered
+export const heat = { mode: "fillet", lo: null, hi: null };
 
-function scaleOf(z) {
+function inFillet(z) {
+  const fu = state.furnace, [x0, x1, y0, y1] = fu.fillet;
+  const out = [];
+  (z || []).forEach((row, i) => {
+    if (fu.y[i] < y0 || fu.y[i] > y1) return;
+    row.forEach((v, j) => { if (fu.x[j] >= x0 && fu.x[j] <= x1) out.push(v); });
+  });
+  return out;
+}
+
+export function scaleOf(z) {
   if (heat.mode === "fixed" && heat.lo !== null && heat.hi !== null && heat.hi > heat.lo) return [heat.lo, heat.hi];
+  const values = heat.mode === "fillet" ? inFillet(z) : (z || []).flat();
   let lo = Infinity, hi = -Infinity;
-  for (const row of z || []) for (const v of row) if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+  for (const v of values) if (v !== null) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
   if (!Number.isFinite(lo)) return [undefined, undefined];
-  lo = 10 * Math.floor(lo / 10); hi = 10 * Math.ceil(hi / 10);
-  if (hi - lo < 20) { const mid = (lo + hi) / 2; lo = mid - 10; hi = mid + 10; }
+  const step = heat.mode === "fillet" ? 1 : 10, least = heat.mode === "fillet" ? 4 : 20;
+  lo = step * Math.floor(lo / step); hi = step * Math.ceil(hi / step);
+  if (hi - lo < least) { const mid = (lo + hi) / 2; lo = mid - least / 2; hi = mid + least / 2; }
   return [lo, hi];
 }
 

@@ -93,6 +93,11 @@ def test_a_new_run_starts_empty_and_takes_changes_once_it_runs(server, browser, 
     blank = [s for s in mine[had:] if not s["heat"]]
     assert not blank, f"the heat map blanked {len(blank)} times after the run's first frame: {blank[:3]}"
     assert page.evaluate("document.getElementById('run-clock').textContent").startswith("t = 30")
+    # the heat map's colours span the fillet (issue 27: the cold edges made the fillet one flat colour)
+    zmin, zmax, lowest = page.evaluate("(() => { const d = document.getElementById('heatmap').data[0];"
+                                       " return [d.zmin, d.zmax, Math.min(...d.z.flat())]; })()")
+    assert zmin - lowest > 50 and zmax - zmin < 100, (zmin, zmax, lowest)
+    _screenshot(page, artifacts, "firsthour-heatmap-fillet.png")
 
     # the second run: empty until its first frame, changes refused (disabled) until it runs
     page.evaluate("window.seen = []")

@@ -155,9 +155,14 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     ax = fig.add_subplot(grid[2, 1])
     if "field_hat" in ts and len(ts["field_hat"]):
         L, W = float(ts["L_s"]), float(ts["W_s"])
-        im = ax.imshow(np.asarray(ts["field_hat"][-1], float), origin="lower", extent=(0, L, 0, W), cmap="turbo",
-                       aspect="equal")
-        fig.colorbar(im, ax=ax, label="K", shrink=0.8)
+        last = np.asarray(ts["field_hat"][-1], float)
+        # the colours span the fillet (the cold edges saturate), so its spread shows (issue 27)
+        inside = last[Fillet.on_grid(ts["x"], ts["y"], L, W).mask]
+        lo, hi = float(np.floor(np.nanmin(inside))), float(np.ceil(np.nanmax(inside)))
+        if hi - lo < 4.0:
+            lo, hi = (lo + hi) / 2 - 2.0, (lo + hi) / 2 + 2.0
+        im = ax.imshow(last, origin="lower", extent=(0, L, 0, W), cmap="turbo", aspect="equal", vmin=lo, vmax=hi)
+        fig.colorbar(im, ax=ax, label="K (fillet's range)", shrink=0.8, extend="both")
         ax.add_patch(Rectangle((FILLET_X[0] * L, FILLET_Y[0] * W), (FILLET_X[1] - FILLET_X[0]) * L,
                                (FILLET_Y[1] - FILLET_Y[0]) * W, fill=False, ls="--", color="white"))
         if "tc_positions" in ts:
