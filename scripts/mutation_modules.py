@@ -170,6 +170,7 @@ def counts(data: dict[str, Any], eq: dict[str, dict[str, Any]]) -> dict[str, Any
             "score": detected / (n - equivalent) if n > equivalent else float("nan")}
 
 
+NOTES = "\n## Notes"
 SUMMARY_HEAD = """# Mutation testing
 
 Written by `bash scripts/mutation.sh MODULE...` (`scripts/mutation_modules.py`; mutmut with the settings of
@@ -252,8 +253,11 @@ def main() -> int:
         for module, why in SCOPE.items():
             state = "current" if cached(module) else ("stale" if _cache_file(module).is_file() else "not run")
             sys.stdout.write(f"{module:42s} {state:8s} {why}\n")
-    if a.summary:
-        a.summary.write_text(SUMMARY_HEAD + summary(list(SCOPE)))
+    if a.summary:  # the generated table; a "## Notes" section written by hand below it is kept
+        notes = ""
+        if a.summary.is_file() and NOTES in a.summary.read_text():
+            notes = NOTES + a.summary.read_text().split(NOTES, 1)[1]
+        a.summary.write_text(SUMMARY_HEAD + summary(list(SCOPE)) + notes)
     if a.report:
         a.report.parent.mkdir(parents=True, exist_ok=True)
         a.report.write_text(full_report(list(SCOPE)))
