@@ -401,6 +401,8 @@ def test_comparison_label_and_delete(browser, tmp_path, small_cfg, artifacts) ->
         assert _js(page, "document.getElementById('cmp-mean').data[0].x[0]") == pytest.approx(0.1)  # one time axis
         heads = _js(page, "[...document.querySelectorAll('#cmp-table th')].map((th) => th.textContent)")
         assert heads == ["metric", ids[0], ids[1]] or heads == ["metric", ids[1], ids[0]]
+        # the table's layout only: the stand-in loop's metrics are in kelvin, not relative like the real loop's;
+        # the figures and the overlaid series are checked on the real loop in test_browser_truth.py
         assert "Mean error, transient (max)" in _text(page, "#cmp-table") and " K · " in _text(page, "#cmp-table")
         # a label typed in the list names the run in the comparison
         page.click(f"#history tr[data-id='{ids[1]}'] button.edit")

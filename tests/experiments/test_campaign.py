@@ -140,14 +140,26 @@ def test_table_marks_the_bounds_that_fail(campaign):
     assert inh < PAPER["fixed"]["inhomogeneity_steady"] and f"{100 * inh:.2f} % |" in table
 
 
+#: the README's headline figures beside the table's metrics: the true mean's transient error, TC4's error at
+#: the oscillation frequency (oscillating runs only) and the calibrated parameters (value and sigma)
+HEADLINE_KEYS = ("true_mean_error_transient_max", "tc4_error_oscillation_amplitude")
+
+
 def _flatten(result: dict[str, Any]) -> dict[str, float | None]:
     flat: dict[str, float | None] = {}
     for e in result["experiments"]:
         for key in MODEL_ERROR_KEYS:
             flat[f"{e['name']}/model_error/{key}"] = e["model_error"][key]
         for s in e["seeds"]:
+            m = s["metrics"]
             for key in METRIC_KEYS:
-                flat[f"{e['name']}/seed_{s['seed']}/{key}"] = s["metrics"][key]
+                flat[f"{e['name']}/seed_{s['seed']}/{key}"] = m[key]
+            for key in HEADLINE_KEYS:
+                if key in m or e["oscillation"]:  # an oscillating run without its amplitude is a missing key
+                    flat[f"{e['name']}/seed_{s['seed']}/{key}"] = m[key]
+            for name, p in m["calibration"].items():
+                for part in ("value", "sigma"):
+                    flat[f"{e['name']}/seed_{s['seed']}/calibration/{name}/{part}"] = p[part]
     return flat
 
 

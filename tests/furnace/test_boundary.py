@@ -95,12 +95,15 @@ def truthless_run(small_radiation):
     furnace = _RealLike(SimulatedFurnace.for_scenario(cfg, scenario, small_radiation))
     assert isinstance(furnace, Furnace)  # the protocol is all the loop needs
     loop = ClosedLoop(cfg, scenario, small_radiation, furnace=furnace)
-    snaps = list(loop.run())
-    return loop, snaps
+    snaps, true_means = [], []
+    for snap in loop.run():  # the truth the loop does not see, for the test: the inner furnace's fillet mean
+        snaps.append(snap)
+        true_means.append(loop.fillet.mean(furnace.inner.true_field()))
+    return loop, snaps, np.array(true_means)
 
 
 def test_a_furnace_without_truth_records_none_and_null_metrics(truthless_run) -> None:
-    loop, snaps = truthless_run
+    loop, snaps, _ = truthless_run
     assert all(s.field_true is None and s.true_mean is None and s.true_inhomogeneity is None for s in snaps)
     arrays = loop.timeseries()
     assert "field_true" not in arrays and arrays["field_hat"].shape[0] == len(snaps)
@@ -111,7 +114,7 @@ def test_a_furnace_without_truth_records_none_and_null_metrics(truthless_run) ->
 
 
 def test_missing_readings_are_recorded_as_nan_and_left_out_of_the_update(truthless_run) -> None:
-    loop, snaps = truthless_run
+    loop, snaps, true_means = truthless_run
     lost = [s for s in snaps if s.t >= 1.0 - 1e-9]
     assert lost and all(np.isnan(s.tc[1]) and np.isfinite(s.tc[[0, 2, 3]]).all() for s in lost)
     assert not loop.estimator.last_info.used[1] and loop.estimator.last_info.used[[0, 2]].all()
@@ -122,8 +125,14 @@ def test_missing_readings_are_recorded_as_nan_and_left_out_of_the_update(truthle
     assert loop.metrics()["late_samples"] == len(lost)
     events = [e for s in snaps for e in s.events]
     assert sum("late: no TC2 in time" in e for e in events) == 1  # one event when the run of late samples starts
-    # the run still tracks its reference with two TCs (the mean error stays within a few kelvin)
-    assert abs(snaps[-1].T_mean_hat - snaps[-1].T_ref) < 20.0
+    # with two TCs left the estimate still converges on the true fillet mean (the furnace's, hidden from the
+    # loop): measured 2.5 K off at most over the last 2 s (1 K TC noise), 0.8 K at the end (5.6 K at 1 s, after
+    # the loss and the initial 7 K offset).  Not the reference: this 100 K/s ramp saturates the lamps (7.6 K
+    # over at the end)
+    t = np.array([s.t for s in snaps])
+    off = np.array([s.T_mean_hat for s in snaps]) - true_means
+    assert abs(off[-1]) < 1.5, off[-1]
+    assert np.abs(off[t >= 6.0]).max() < 3.5, np.abs(off[t >= 6.0]).max()
 
 
 def test_the_simulated_furnace_keeps_its_own_clock(small_radiation) -> None:

@@ -238,3 +238,44 @@ def test_shadow_metrics_are_those_of_its_own_outputs():
     assert m["calibration"] == {"lamp_efficiency": {"value": -0.1, "sigma": 0.01},
                                 "emissivity": {"value": -0.05, "sigma": 0.02}}
     assert "calibration" not in m["shadow"]
+
+
+# -- oscillation_amplitude: oracles from closed-form sinusoids --------------------------------------------------
+
+def test_oscillation_amplitude_of_a_known_sinusoid_with_offset_and_harmonic():
+    """e(t) = 3 + 2.5 sin(w t + 0.7) + 1.0 sin(2 w t) over 4 whole periods, sampled uniformly: the offset is
+    fitted (its own column) and the 2nd harmonic is orthogonal to sin/cos(w t) over whole periods of uniform
+    samples, so the amplitude at w is exactly 2.5 (to rounding)."""
+    from twin.runs.metrics import oscillation_amplitude
+
+    period = 4.5
+    t = np.arange(0.0, 4 * period, 0.1)  # 45 samples a period, 180 in all
+    w = 2 * np.pi / period
+    e = 3.0 + 2.5 * np.sin(w * t + 0.7) + 1.0 * np.sin(2 * w * t)
+    assert oscillation_amplitude(t, e, period) == pytest.approx(2.5, rel=1e-9)
+    # a sinusoid plus offset is in the model's span: any window, whole periods or not, gives it exactly
+    part = t < 1.37 * period
+    assert oscillation_amplitude(t[part], (e - np.sin(2 * w * t))[part], period) == pytest.approx(2.5, rel=1e-9)
+    # at another frequency there is (almost) nothing: the harmonic alone, at w, over whole periods
+    assert oscillation_amplitude(t, np.sin(2 * w * t), period) == pytest.approx(0.0, abs=1e-9)
+    # missing samples (NaN) are left out, not zeros: the same amplitude from the rest
+    holes = e.copy()
+    holes[::7] = np.nan
+    assert oscillation_amplitude(t, holes - np.sin(2 * w * t), period) == pytest.approx(2.5, rel=1e-9)
+
+
+def test_tc4_oscillation_amplitude_is_that_of_the_signed_error():
+    """A run whose TC4 reading oscillates about the estimate with 2 K at the oscillation period (no bias): the
+    metric is 2 K / setpoint.  Of the absolute error it was ~0 (|sin| has no component at the period)."""
+    import json
+
+    ts = _series(n_t=401, t_E=10.0, t_end=40.0)
+    period = 4.0
+    t = ts["t"]
+    ts["tc"] = ts["tc"].copy()
+    ts["tc"][:, 3] += 2.0 * np.sin(2 * np.pi * t / period)
+    ts["eta"] = 0.01 * np.sin(2 * np.pi * t / period)
+    ts["scenario"] = json.dumps({"oscillation": {"enabled": True, "period": period, "amplitude": 0.01}})
+    m = compute_metrics(ts)
+    assert m["tc4_error_oscillation_amplitude"] == pytest.approx(2.0 / 1100.0, rel=1e-6)
+    assert m["tc4_error_steady_max"] == pytest.approx(2.0 / 1100.0, rel=1e-3)  # the peak, for comparison

@@ -266,7 +266,8 @@ def compute_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
         out["true_mean_error_transient_max"] = _max(true_mean_err, trf)
     if "field_sigma" in ts:
         out.update(uncertainty_metrics(ts, used, trf, stf, fillet, after))
-    return _extras(ts, out, t, st, tc_err)
+    tc4_signed = (tc[:, 3] - tc_hat[:, 3]) / scale if t.size else np.zeros(0)
+    return _extras(ts, out, t, st, tc4_signed)
 
 
 #: the uncertainty metrics (issue 25) of a run that records ``field_sigma``
@@ -298,16 +299,19 @@ def uncertainty_metrics(ts: Mapping[str, Any], used: NDArray[np.bool_], trf: NDA
     return out
 
 
-def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc_err: Array,
+def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np.bool_], tc4_signed: Array,
             ) -> dict[str, Any]:
     """The metrics a run has only in some configurations (``true_mean_error_transient_max``, a simulated
     furnace's, is added before): ``tc4_error_oscillation_amplitude`` (an oscillating
-    run: the TC4 error's component at the oscillation frequency over the steady window, relative),
+    run: the amplitude of the signed TC4 error's component at the oscillation frequency over the steady
+    window, relative),
     ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run) and ``shadow`` (the shadow
     estimator's metrics)."""
     period = _oscillation_period(ts)
     if period is not None and t.size:
-        out["tc4_error_oscillation_amplitude"] = oscillation_amplitude(t[st], tc_err[st, 3], period)
+        # of the signed error: |e| of an error oscillating about zero has no component at the frequency
+        # (|sin| repeats twice per period), so the absolute error hid an oscillation larger than the bias
+        out["tc4_error_oscillation_amplitude"] = oscillation_amplitude(t[st], tc4_signed[st], period)
     if "parameters" in ts and len(ts["parameters"]):
         values, sigma = np.asarray(ts["parameters"][-1], float), np.asarray(ts["parameter_sigma"][-1], float)
         out["calibration"] = {name: {"value": float(values[i]), "sigma": float(sigma[i])}
