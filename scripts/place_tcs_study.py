@@ -37,12 +37,15 @@ def fillet_rms_error(ts: dict[str, Any]) -> float:
     return float(np.sqrt(np.mean(err[..., fillet.mask] ** 2)) / w.setpoint)
 
 
-def run_case(cfg: Any, positions: list[tuple[float, float]], seed: int, oscillate: bool) -> dict[str, float]:
+def run_case(cfg: Any, positions: list[tuple[float, float]], seed: int, oscillate: bool,
+             plans: dict[Any, Any]) -> dict[str, float]:
+    """One closed-loop run with TC1-3 at ``positions``; ``plans`` is shared by the runs of one furnace (the first
+    plan does not depend on where the TCs are: the initial estimate is the uniform start, so it is solved once)."""
     from twin.runs.loop import ClosedLoop
     from twin.scenario import Scenario
 
     placed = cfg.with_overrides({f"sensors.tc{i + 1}": list(p) for i, p in enumerate(positions)})
-    loop = ClosedLoop(placed, Scenario(seed=seed, oscillation={"enabled": oscillate}))
+    loop = ClosedLoop(placed, Scenario(seed=seed, oscillation={"enabled": oscillate}), plan_cache=plans)
     for _ in loop.run():
         pass
     ts = loop.timeseries()
@@ -86,18 +89,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--docs", type=Path, default=None, help="write the table between the markers of this file")
     args = ap.parse_args(argv)
     result: dict[str, Any] = {"seeds": args.seeds, "oscillate": args.oscillate, "furnaces": {}}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    done = json.loads(args.out.read_text()) if args.out.exists() else {}
+    if done.get("seeds") == args.seeds and done.get("oscillate") == args.oscillate:
+        result["furnaces"].update(done["furnaces"])  # resume: the furnaces measured before
     for furnace in args.furnaces:
+        if furnace in result["furnaces"]:
+            continue
         cfg = load_config(None if furnace == "default" else furnace)
         rec = rank_positions(cfg, count=3, oscillate=args.oscillate)
         positions = {"paper": [tuple(p) for p in PAPER_TC123],
                      "recommended": [(p["x_rel"], p["y_rel"]) for p in rec["positions"]]}
-        runs = {name: [run_case(cfg, pos, s, args.oscillate) for s in args.seeds] for name, pos in positions.items()}
+        plans: dict[Any, Any] = {}
+        runs = {name: [run_case(cfg, pos, s, args.oscillate, plans) for s in args.seeds]
+                for name, pos in positions.items()}
         result["furnaces"][furnace] = {"positions": positions, "runs": runs,
                                        "information": {"paper": rec["baseline"]["paper"],
                                                        "recommended": rec["positions"][-1]["score"]}}
+        args.out.write_text(json.dumps(result, indent=1) + "\n")  # kept furnace by furnace
         sys.stderr.write(f"{furnace}: done\n")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n")
     text = table(result)
     if args.docs is not None:
         doc = args.docs.read_text()

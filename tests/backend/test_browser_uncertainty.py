@@ -24,6 +24,7 @@ def test_sigma_toggle_and_band(tmp_path, small_cfg, browser, artifacts) -> None:
                                                "seed": 41}).json()["id"]
             wait_status(c, run_id, {"finished"}, timeout=300)
             stored = c.get(f"/api/runs/{run_id}/series").json()
+            stored_metrics = c.get(f"/api/runs/{run_id}/metrics").json()
         page = browser.new_page(viewport={"width": 1280, "height": 900})
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
@@ -39,6 +40,8 @@ def test_sigma_toggle_and_band(tmp_path, small_cfg, browser, artifacts) -> None:
                              ".map((d) => d.name)")
         assert band == ["fillet mean ± 2σ"]
         assert "2σ" in page.inner_text("#heat-sub")
+        note = page.inner_text("#uncertainty-note")  # the run's uncertainty metrics beside its errors
+        assert f"steady {100 * stored_metrics['coverage_2sigma_steady']:.1f} %" in note, note
         page.screenshot(path=str(artifacts / "dashboard-sigma.png"), timeout=120_000)
         page.uncheck("#show-sigma")
         page.wait_for_function(f"{title} === 'T (K)'", timeout=60_000)
