@@ -87,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--oscillate", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("docs/figures/place-tcs/study.json"))
     ap.add_argument("--docs", type=Path, default=None, help="write the table between the markers of this file")
+    ap.add_argument("--table-only", action="store_true", help="only the table of the furnaces already in --out")
     args = ap.parse_args(argv)
     result: dict[str, Any] = {"seeds": args.seeds, "oscillate": args.oscillate, "furnaces": {}}
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     if done.get("seeds") == args.seeds and done.get("oscillate") == args.oscillate:
         result["furnaces"].update(done["furnaces"])  # resume: the furnaces measured before
     for furnace in args.furnaces:
-        if furnace in result["furnaces"]:
+        if furnace in result["furnaces"] or args.table_only:
             continue
         cfg = load_config(None if furnace == "default" else furnace)
         rec = rank_positions(cfg, count=3, oscillate=args.oscillate)
@@ -106,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         result["furnaces"][furnace] = {"positions": positions, "runs": runs,
                                        "information": {"paper": rec["baseline"]["paper"],
                                                        "recommended": rec["positions"][-1]["score"]}}
+        result["furnaces"] = {f: result["furnaces"][f] for f in args.furnaces if f in result["furnaces"]}
         args.out.write_text(json.dumps(result, indent=1) + "\n")  # kept furnace by furnace
         sys.stderr.write(f"{furnace}: done\n")
     text = table(result)
