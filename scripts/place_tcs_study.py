@@ -73,8 +73,10 @@ def table(result: dict[str, Any]) -> str:
                          f"{100 * mean('true_mean_error_steady_max'):.2f} % | {mean('coverage_2sigma_steady'):.3f} |")
     mode = "oscillating" if result["oscillate"] else "fixed"
     seeds = ", ".join(str(s) for s in result["seeds"])
-    return (f"Closed loop 1100 K / 120 s, {mode} specimen, honest truth, seeds {seeds} "
-            "(`python scripts/place_tcs_study.py`):\n\n" + "\n".join(lines) + "\n")
+    cmd = ("python scripts/place_tcs_study.py --seeds " + " ".join(str(s) for s in result["seeds"])
+           + (" --oscillate" if result["oscillate"] else "") + " --docs docs/uncertainty.md")
+    return (f"Closed loop 1100 K / 120 s, {mode} specimen, honest truth, seeds {seeds} (`{cmd}`):\n\n"
+            + "\n".join(lines) + "\n")
 
 
 def main(argv: list[str] | None = None) -> int:
