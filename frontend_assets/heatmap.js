@@ -2,7 +2,7 @@
 // colour scale that follows the field (auto, in 10 K steps) or stays where the user fixed it.
 import { $, fmt } from "./page.js";
 import { state } from "./state.js";
-import { sigmaTrace, unc } from "./uncertainty.js";
+import { lastSigma, sigmaTrace, unc } from "./uncertainty.js";
 
 const TURBO = [[0, "#30123b"], [0.1, "#4145ab"], [0.2, "#4675ed"], [0.3, "#39a2fc"], [0.4, "#1bcfd4"],
   [0.5, "#24eca6"], [0.6, "#61fc6c"], [0.7, "#a4fc3b"], [0.8, "#d1e834"], [0.9, "#f3c63a"], [1, "#7a0403"]];
@@ -73,7 +73,7 @@ export function heatmapFigure() {
   const tc = s && s.tc ? s.tc : [null, null, null, null];
   const f = state.lastFrame;
   $("heat-sub").textContent = f ? `t = ${fmt(f.t)} s · mean ${fmt(f.T_mean_hat)} K · ref ${fmt(f.T_ref)} K`
-    + (f.sigma_mean !== undefined && f.sigma_mean !== null ? ` ± ${fmt(2 * f.sigma_mean)} K (2σ)` : "")
+    + (lastSigma(s) !== null ? ` ± ${fmt(2 * lastSigma(s))} K (2σ)` : "")
     + (unc.show ? (s && s.fieldSigma ? " · showing σ" : " · no σ for this run") : "") : "";
   const sigma = sigmaTrace(fu, s);
   // TC1-TC3 above their marks, TC4 (between TC1 and TC3) below: the labels do not cover each other

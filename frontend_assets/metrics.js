@@ -49,7 +49,18 @@ export function metricsTable(run) {
     + `${shadow ? `<td class="num">${percent(shadow[k])}</td>` : ""}</tr>`).join("");
   const shadowHead = shadow ? '<th class="num" title="the same metric of the shadow estimator">shadow %</th>' : "";
   return `<div class="note">${esc(windowNote(run))}</div><table><thead><tr><th>metric</th><th class="num">K</th>`
-    + `<th class="num">% of setpoint</th>${shadowHead}</tr></thead><tbody>${rows}</tbody></table>${calibrationNote(m.calibration)}`;
+    + `<th class="num">% of setpoint</th>${shadowHead}</tr></thead><tbody>${rows}</tbody></table>${calibrationNote(m.calibration)}`
+    + uncertaintyNote(m);
+}
+
+// The reported uncertainty against the truth (issue 25): shares and normalised squares, not errors in K.
+function uncertaintyNote(m) {
+  const share = (v) => (v === null || v === undefined ? "–" : `${fmt(100 * v, 1)} %`);
+  if (!("coverage_2sigma_steady" in m) && !("nis_mean" in m)) return "";
+  return `<div class="note" id="uncertainty-note">truth within ±2σ of the estimate (fillet cells): transient `
+    + `${share(m.coverage_2sigma_transient)}, steady ${share(m.coverage_2sigma_steady)} (95 % if σ is right) · `
+    + `NEES/cell ${m.nees_mean === null || m.nees_mean === undefined ? "–" : fmt(m.nees_mean, 2)} · `
+    + `NIS/reading ${m.nis_mean === null || m.nis_mean === undefined ? "–" : fmt(m.nis_mean, 2)} (1 if consistent)</div>`;
 }
 
 // Several runs side by side: one column per run ("K · %"), one row per metric.

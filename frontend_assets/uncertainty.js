@@ -17,6 +17,12 @@ export function sigmaTrace(fu, s) {
     hovertemplate: "x %{x:.3f} m<br>y %{y:.3f} m<br>σ %{z:.2f} K<extra></extra>" };
 }
 
+// The fillet mean's latest sigma (K) in the shown series, or null
+export function lastSigma(s) {
+  const v = s && s.sigma_mean && s.sigma_mean.length ? s.sigma_mean[s.sigma_mean.length - 1] : null;
+  return v === undefined ? null : v;
+}
+
 // The +-2 sigma band around the fillet mean: two traces (the lower edge, then the upper filled to it)
 export function meanBand(s) {
   if (!s || !s.sigma_mean || !s.sigma_mean.some((v) => v !== null)) return [];

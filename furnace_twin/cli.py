@@ -113,6 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     check_arguments(s)
 
+    s = sub.add_parser("place-tcs", help="rank thermocouple positions by the information they give about the field "
+                                         "(paper, Remark 3)")
+    from twin.experiments.place_tcs import add_arguments as place_arguments
+
+    place_arguments(s)
+
     s = sub.add_parser("study", help="a design study (grid and/or Monte Carlo of runs) on Dask distributed")
     s.add_argument("file", help="study TOML file (product.md: furnace, [base], [grid], [monte_carlo])")
     s.add_argument("--out", default=None, help="study folder (default out/studies/<file name>); re-run to resume")
@@ -190,6 +196,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from twin.furnace.opcua.check import check_command
 
             return check_command(cfg, args)
+        if args.command == "place-tcs":
+            from twin.experiments.place_tcs import place_tcs_command
+
+            return place_tcs_command(cfg, args)
         if args.command == "study":
             from twin.studies.command import study_command
 

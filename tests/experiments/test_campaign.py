@@ -125,6 +125,9 @@ def test_metrics_are_the_worst_over_the_seeds(campaign):
         a, b = (s["metrics"]["tc4_error_steady_max"] for s in e["seeds"])
         assert a != b
     assert worst([{"a": 0.1, "b": None}, {"a": float("nan"), "b": 0.3}, {"a": 0.2}]) == {"a": 0.2, "b": 0.3}
+    # a coverage is worst where it is smallest (issue 25: the share of the truth inside the reported band)
+    cov = "coverage_2sigma_steady"
+    assert worst([{cov: 0.95}, {cov: 0.88}]) == {cov: 0.88}
 
 
 def test_table_marks_the_bounds_that_fail(campaign):

@@ -69,13 +69,19 @@ class FieldUncertainty:
         self._w = w.reshape(-1, 4)
         self._rows = self._idx[:, :, None]
         self._cols = self._idx[:, None, :]
+        self._ww = (self._w[:, :, None] * self._w[:, None, :]).reshape(-1, 16)  # w_i w_j per cell
+        self._flat: dict[int, NDArray[np.intp]] = {}  # per leading dimension of P: flat indices of the 4 x 4 blocks
         self.c_m = np.asarray(fe.c_m, float)
         self.representation_var = float(representation_rms) ** 2
 
     def cell_variance(self, P: NDArray[np.floating[Any]]) -> Array:
         """phi_c^T P phi_c + r^2 for every cell, (N_y, N_x) in K^2 (P: (n, n) or larger, nodes first)."""
-        block = np.asarray(P[self._rows, self._cols], float)  # (cells, 4, 4)
-        var = np.einsum("ci,cij,cj->c", self._w, block, self._w) + self.representation_var
+        m = P.shape[1]
+        flat = self._flat.get(m)
+        if flat is None:
+            flat = self._flat[m] = (self._rows * m + self._cols).reshape(-1, 16)
+        block = np.take(P, flat)  # (cells, 16) entries of P, in its own memory order (C contiguous)
+        var = np.einsum("ck,ck->c", self._ww, block) + self.representation_var
         return np.clip(var, 0.0, None).reshape(self.shape)
 
     def field_sigma(self, P: NDArray[np.floating[Any]]) -> Array:
