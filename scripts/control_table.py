@@ -50,6 +50,17 @@ COLUMNS = (
 )
 
 
+def _patient_plans(max_wall_s: float = 1800.0) -> None:
+    """The first plan with IPOPT's wall-time limit raised from 120 s: on a machine shared by many jobs the OCP
+    took longer than 120 s (the run then ends in error); the plan itself does not change."""
+    import functools
+
+    import twin.control.replan as replan
+    from twin.control.feedforward import solve_feedforward
+
+    replan.solve_feedforward = functools.partial(solve_feedforward, max_wall_s=max_wall_s)  # type: ignore[assignment]
+
+
 def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None) -> dict[str, Any]:
     from twin.config import load_config
     from twin.control.calibration_memory import learnt_parameters
@@ -96,6 +107,7 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    _patient_plans()
     for seed in args.seeds:
         group = f"{args.variant}-second" if args.second_run else args.variant
         path = Path(args.out) / args.furnace / group / f"seed_{seed}.json"
@@ -104,6 +116,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         learnt = None
         if args.second_run:
             first = Path(args.out) / args.furnace / args.variant / f"seed_{seed}.json"
+            while not first.exists():  # the first run of this seed may still be going (another process)
+                time.sleep(10.0)
             learnt = json.loads(first.read_text()).get("calibration") or {}
         result = run_one(args.furnace, args.variant, seed, learnt)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -188,12 +188,12 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
     w_int = (deltas * t_s)[:, None]
     GI = np.vstack([np.zeros((1, nz)), np.cumsum(w_int * Y, axis=0)])  # (H + 1, nz)
-    I_free = float(e0[n]) + np.concatenate([[0.0], np.cumsum(w_int[:, 0] * yf)])
+    I_all = float(e0[n]) + np.concatenate([[0.0], np.cumsum(w_int[:, 0] * yf)])
     # stage costs of x_1 .. x_H-1 (x_0 does not depend on z)
     Ys, GIs = Y[1:], GI[1:H]
     Hess += q0 * (Ys.T @ Ys) + q1 * (GIs.T @ GIs)
-    grad = q0 * (Ys.T @ yf[1:]) + q1 * (GIs.T @ I_free[1:H])
-    GI, I_free = GI[H], float(I_free[H])
+    grad = q0 * (Ys.T @ yf[1:]) + q1 * (GIs.T @ I_all[1:H])
+    GI, I_free = GI[H], float(I_all[H])
     PT = gains.cost_to_go(end)
     G_full = np.vstack([Gd, GI[None, :]])
     x_free = np.append(d_free, I_free)
