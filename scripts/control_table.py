@@ -4,7 +4,7 @@
     python scripts/control_table.py run --furnace default --variant twin --seeds 0 1 2 3 4 --out out/control
     python scripts/control_table.py run --furnace default --variant twin --second-run --seeds 0 1 2 3 4 \
         --out out/control
-    python scripts/control_table.py table --out out/control > docs/control_table.md
+    python scripts/control_table.py table --out docs/control_runs --write docs/control.md
 
 Each run: the paper's reference (1100 K in t_E = 120 s, 240 s), fixed specimen, TC4 at the centre, the simulated
 furnace's own truth (``truth = "independent"``), one seed; the errors are recomputed from the true field of every
@@ -161,6 +161,17 @@ def table(out: Path) -> str:
     return "\n".join(rows) + "\n"
 
 
+BEGIN, END = "<!-- control_table: begin -->", "<!-- control_table: end -->"
+
+
+def write_into(doc: Path, text: str) -> None:
+    """Replace the table between the markers of ``doc`` (docs/control.md)."""
+    page = doc.read_text()
+    head, rest = page.split(BEGIN, 1)
+    _, tail = rest.split(END, 1)
+    doc.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -172,10 +183,15 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--out", default="out/control")
     t = sub.add_parser("table")
     t.add_argument("--out", default="out/control")
+    t.add_argument("--write", default=None, metavar="DOC", help="put the table between the markers of DOC")
     args = p.parse_args(argv)
     if args.cmd == "run":
         return cmd_run(args)
-    sys.stdout.write(table(Path(args.out)))
+    text = table(Path(args.out))
+    if args.write:
+        write_into(Path(args.write), text)
+    else:
+        sys.stdout.write(text)
     return 0
 
 
