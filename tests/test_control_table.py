@@ -23,7 +23,7 @@ def test_the_page_shows_the_committed_runs():
     shown = page.split(script.BEGIN, 1)[1].split(script.END, 1)[0].strip()
     made = script.table(REPO / "docs" / "control_runs").strip()
     assert shown == made, "run: python scripts/control_table.py table --out docs/control_runs --write docs/control.md"
-    assert made.count("\n") >= 3  # a header, its rule and at least two rows of runs
+    assert made.count("\n") >= 2  # a header, its rule and at least one row of runs
 
 
 def test_the_table_marks_a_bound_it_misses(tmp_path):
