@@ -9,6 +9,9 @@
 | step_ms | EKF update + controller per sample, median, default estimator |
 | closed_loop_rtf_paper, step_ms_paper | the same with the paper's estimator (averaged, no calibration) |
 | closed_loop_speed_ratio | closed_loop_rtf / closed_loop_rtf_paper (target >= 0.8) |
+| closed_loop_rtf_lqg, step_ms_lqg | the same with the paper's LQG feedback (default estimator) |
+| mpc_step_ms_p50, mpc_step_ms_p99 | the MPC's time per sample (condensing + QP), when the furnace's feedback is the MPC |
+| closed_loop_rtf_mpc_over_lqg | closed_loop_rtf / closed_loop_rtf_lqg (issue 26: at least 0.5) |
 | ocp_s | feedforward OCP solve for a whole run |
 | replan_s | re-plan after a reference change, warm-started |
 | stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
@@ -48,11 +51,14 @@ def closed_loop_figures(cfg: FurnaceConfig, radiation: Any, duration: float = 24
     from twin.runs.loop import ClosedLoop
     from twin.scenario import PAPER_ESTIMATOR, Scenario
 
-    runs: dict[str, list[tuple[float, float]]] = {"": [], "_paper": []}
+    runs: dict[str, list[tuple[float, float]]] = {"": [], "_paper": [], "_lqg": []}
+    mpc_ms: list[float] = []
     for _ in range(repeats):
-        for suffix, estimator in (("", None), ("_paper", PAPER_ESTIMATOR)):
+        for suffix, estimator in (("", None), ("_paper", PAPER_ESTIMATOR), ("_lqg", None)):
             scenario = Scenario(duration=duration) if estimator is None else Scenario(
                 duration=duration, estimator=estimator.model_dump())
+            if suffix == "_lqg":  # the paper's feedback on the default estimator (issue 26: the MPC's cost)
+                scenario = Scenario(duration=duration, control={"feedback": "lqg"})
             loop = ClosedLoop(cfg, scenario, radiation, background=True)  # the OCP is solved here
             t0 = time.perf_counter()
             for _ in loop.run():
@@ -60,11 +66,17 @@ def closed_loop_figures(cfg: FurnaceConfig, radiation: Any, duration: float = 24
             wall = time.perf_counter() - t0
             loop.close()
             runs[suffix].append((duration / wall, float(np.median(loop.compute_ms))))
+            if suffix == "" and hasattr(loop.controller, "step_ms"):
+                mpc_ms.extend(loop.controller.step_ms)
     out: dict[str, float] = {}
     for suffix, values in runs.items():
         out[f"closed_loop_rtf{suffix}"] = float(np.median([v[0] for v in values]))
         out[f"step_ms{suffix}"] = float(np.median([v[1] for v in values]))
     out["closed_loop_speed_ratio"] = out["closed_loop_rtf"] / out["closed_loop_rtf_paper"]
+    if mpc_ms:  # the default feedback is the MPC: its own time per sample, and the loop's speed against the LQG's
+        out["mpc_step_ms_p50"] = float(np.percentile(mpc_ms, 50))
+        out["mpc_step_ms_p99"] = float(np.percentile(mpc_ms, 99))
+        out["closed_loop_rtf_mpc_over_lqg"] = out["closed_loop_rtf"] / out["closed_loop_rtf_lqg"]
     return out
 
 

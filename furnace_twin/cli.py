@@ -95,6 +95,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--estimator", choices=("default", "paper", "both"), default="default",
                    help="the twin's default estimator, the paper's (averaged model, no calibration), or both "
                         "side by side (the paper's runs in OUT/paper_estimator)")
+    s.add_argument("--controller", choices=("default", "lqg", "mpc", "both"), default="default",
+                   help="the feedback: the furnace's [control] feedback, the paper's LQG, the MPC, or both side by "
+                        "side (the MPC's runs in OUT/mpc)")
+    s.add_argument("--calibration", choices=("none", "learn"), default="none",
+                   help="learn: run every recipe a second time, planned with what its first run learnt (the "
+                        "calibration memory's rule; in OUT/second_run)")
+    s.add_argument("--experiments", nargs="+", default=None, metavar="NAME",
+                   help="only these experiments (e.g. fixed_tc4_0.5); default all six")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")

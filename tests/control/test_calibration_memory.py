@@ -76,3 +76,21 @@ def test_an_unreadable_file_is_the_nominal_model(tmp_path, cfg, caplog):
     # learning again replaces it
     mem.learn("r3", {"lamp_efficiency": {"value": -0.05, "sigma": 0.01}}, cfg)
     assert mem.plan_parameters().lamp_efficiency == -0.05
+
+
+def test_the_plan_takes_what_control_plan_learns_names(tmp_path, cfg):
+    """[control] plan_learns = ["lamp_efficiency"] (default): the emissivity the estimator fits to TC1-3 is an
+    effective value (-30 % where the truth has -5 %) and planning with it measured worse (docs/control.md)."""
+    from twin.control.calibration_memory import learnt_parameters
+
+    cal = {"lamp_efficiency": {"value": -0.12, "sigma": 0.015}, "emissivity": {"value": -0.3, "sigma": 0.03}}
+    p = learnt_parameters(cal, cfg)
+    assert p is not None and (p.lamp_efficiency, p.emissivity) == (-0.12, 0.0)
+    both = cfg.with_overrides({"control.plan_learns": ["lamp_efficiency", "emissivity"]})
+    assert learnt_parameters(cal, both).emissivity == -0.3
+    assert learnt_parameters({"lamp_efficiency": {"value": -0.12, "sigma": 0.08}}, cfg) is None  # not learnt
+    assert learnt_parameters(None, cfg) is None
+    mem = CalibrationMemory.of(tmp_path, cfg, Scenario())
+    mem.learn("r1", cal, cfg)
+    filled = with_memory(Scenario(), tmp_path, cfg).control.plan_parameters
+    assert (filled.lamp_efficiency, filled.emissivity) == (-0.12, 0.0)

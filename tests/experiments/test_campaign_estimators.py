@@ -47,7 +47,7 @@ def test_comparison_table_marks_each_side() -> None:
 def test_both_runs_the_paper_into_its_own_folder(tmp_path, monkeypatch, capsys) -> None:
     asked = []
 
-    def fake(cfg, out, t_E, sink_factories=(), *, seeds, truth, estimator):
+    def fake(cfg, out, t_E, sink_factories=(), *, seeds, truth, estimator, **_):
         asked.append((out, estimator))
         out.mkdir(parents=True, exist_ok=True)
         return _result(estimator, 0.004 if estimator == "default" else 0.006, 0.001)

@@ -140,13 +140,12 @@ class CalibrationMemory:
                      {k: round(p["value"], 4) for k, p in params.items()})
         return data
 
-    def plan_parameters(self) -> PlanParameters | None:
-        """The learnt deviations for the next plan, or None when nothing is learnt."""
-        params = self.load()["parameters"]
-        if not params:
-            return None
-        return PlanParameters(**{name: p["value"] for name, p in params.items()
-                                 if name in PlanParameters.model_fields})
+    def plan_parameters(self, learns: tuple[str, ...] | None = None) -> PlanParameters | None:
+        """The learnt deviations for the next plan (only those named in ``learns``, all if None), or None when
+        nothing is learnt."""
+        params = {name: p["value"] for name, p in self.load()["parameters"].items()
+                  if name in PlanParameters.model_fields and (learns is None or name in learns)}
+        return PlanParameters(**params) if params else None
 
     def reset(self) -> None:
         """Forget everything learnt: the next run plans with the nominal model."""
@@ -175,12 +174,36 @@ def memories(data_dir: str | os.PathLike[str], cfg: FurnaceConfig) -> list[Calib
     return out
 
 
-def with_memory(scenario: Scenario, data_dir: str | os.PathLike[str], cfg: FurnaceConfig) -> Scenario:
-    """The scenario with ``control.plan_parameters`` from the memory, unless it gives them itself."""
-    if scenario.control.plan_parameters is not None:
-        return scenario
-    learnt = CalibrationMemory.of(data_dir, cfg, scenario).plan_parameters()
+def learnt_parameters(calibration: dict[str, Any] | None, cfg: FurnaceConfig) -> PlanParameters | None:
+    """What a run's ``calibration`` (``metrics.json``) gives the next plan: the parameters it learnt (module
+    docstring) among ``[control] plan_learns``, or None."""
+    if not calibration:
+        return None
+    learnt = {}
+    for name in cfg.control.plan_learns:
+        v = calibration.get(name)
+        if not isinstance(v, dict):
+            continue
+        value, sigma = v.get("value"), v.get("sigma")
+        prior = float(getattr(cfg.calibration.prior_sigma, name))
+        if isinstance(value, int | float) and isinstance(sigma, int | float) and math.isfinite(value) \
+                and math.isfinite(sigma) and sigma < LEARNT_FRACTION * prior:
+            learnt[name] = float(value)
+    return PlanParameters(**learnt) if learnt else None
+
+
+def with_parameters(scenario: Scenario, learnt: PlanParameters | None) -> Scenario:
+    """The scenario with ``control.plan_parameters = learnt`` (unchanged if None)."""
     if learnt is None:
         return scenario
     control = scenario.control.model_copy(update={"plan_parameters": learnt})
     return scenario.model_copy(update={"control": control})
+
+
+def with_memory(scenario: Scenario, data_dir: str | os.PathLike[str], cfg: FurnaceConfig) -> Scenario:
+    """The scenario with ``control.plan_parameters`` from the memory (those ``[control] plan_learns`` names),
+    unless it gives them itself."""
+    if scenario.control.plan_parameters is not None:
+        return scenario
+    return with_parameters(scenario, CalibrationMemory.of(data_dir, cfg, scenario).plan_parameters(
+        cfg.control.plan_learns))

@@ -99,48 +99,101 @@ class Prediction:
     u_ff: Array  # (H, m) the feedforward along the horizon
 
 
+@dataclass(frozen=True)
+class SegmentPowers:
+    """Powers of one held linearisation (Phi, Gamma), up to ``every`` steps: Phi^p, c^T Phi^p and Phi^p Gamma.
+
+    The design holds Phi_j, Gamma_j over ``jacobian_every`` samples (:func:`twin.control.lqg.lqg_gains`), so the
+    prediction crosses a held stretch of L steps with one product Phi^L G instead of L products (the MPC's cost
+    per sample drops about L-fold), and reads the fillet mean inside it from the rows c^T Phi^l."""
+
+    Phi_pow: Array  # (E + 1, n, n): Phi^0 .. Phi^E
+    rows: Array  # (E + 1, n): c^T Phi^p
+    gam_pow: Array  # (E, n, m): Phi^p Gamma, p = 0 .. E - 1
+    c_gam: Array  # (E, m): c^T Phi^p Gamma
+
+    @classmethod
+    def of(cls, Phi: Array, Gam: Array, c: Array, E: int) -> SegmentPowers:
+        n = Phi.shape[0]
+        P = np.empty((E + 1, n, n))
+        P[0] = np.eye(n)
+        for p in range(1, E + 1):
+            P[p] = Phi @ P[p - 1]
+        rows = np.einsum("i,pij->pj", c, P)
+        gam = P[:E] @ Gam
+        return cls(P, rows, gam, np.einsum("i,pim->pm", c, gam))
+
+
+def _segments(j: int, end: int, N: int, every: int) -> list[tuple[int, int, int]]:
+    """(first step k0, length L, linearisation key) of the held stretches of the horizon j .. end - 1 (key: the
+    held index s // every inside the plan, -1 beyond it, cut every ``every`` steps)."""
+    out = []
+    k = 0
+    while j + k < end:
+        s = j + k
+        if s < N:
+            key = s // every
+            stop = min((key + 1) * every, N, end)
+        else:
+            key = -1
+            stop = min(s + every, end)
+        out.append((k, stop - s, key))
+        k = stop - j
+    return out
+
+
 def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1: float, r0: float,
                  delta0: float, j: int, e0: Array, u_prev: Array | None, s: MPCSettings,
-                 with_rates: bool = True) -> Prediction:
-    """The MPC's QP at sample j from the augmented error e0 = [theta_hat - theta_ref,j ; e_I] (module docstring)."""
+                 with_rates: bool = True, cache: dict[int, SegmentPowers] | None = None) -> Prediction:
+    """The MPC's QP at sample j from the augmented error e0 = [theta_hat - theta_ref,j ; e_I] (module docstring).
+
+    ``cache``: :class:`SegmentPowers` of the held linearisations by key, kept between samples of one plan."""
     n = e0.size - 1
     N = plan.n_steps
-    end = horizon_end(j, s.horizon, gains.jacobian_every, N)
+    every = gains.jacobian_every
+    end = horizon_end(j, s.horizon, every, N)
     H = end - j
     blocks = move_blocks(H, s.moves)
     m = plan.u_ff.shape[1]
     nz = m * len(blocks)
+    block_of = np.repeat(np.arange(len(blocks)), blocks)  # the move of each step
+    store = {} if cache is None else cache
     # x_k = x_free_k + G_k z, split into the nodes (d) and the integral (I)
-    d_free, I_free = e0[:n].copy(), float(e0[n])
-    Gd, GI = np.zeros((n, nz)), np.zeros(nz)
-    Hess, grad = np.zeros((nz, nz)), np.zeros(nz)
-    c = np.asarray(c_m, float)
-    u_ff = np.empty((H, m))
-    t_s = plan.t_s
-    k = 0
+    d_free = e0[:n].copy()
+    Gd = np.zeros((n, nz))
+    Hess = np.zeros((nz, nz))
     for b, length in enumerate(blocks):
-        cols = slice(b * m, (b + 1) * m)
-        Hess[cols, cols] += r0 * length * np.eye(m)
-        for _ in range(length):
-            # stage cost of x_k (k = 0 is constant in z)
-            if k > 0:
-                act = slice(0, (b + 1) * m)
-                cd = c @ Gd[:, act]
-                gi = GI[act]
-                Hess[act, act] += q0 * np.outer(cd, cd) + q1 * np.outer(gi, gi)
-                grad[act] += (q0 * float(c @ d_free)) * cd + (q1 * I_free) * gi
-            uf = plan.sample(j + k)[0]
-            u_ff[k] = uf
-            Phi, Gam = gains.linearisation(j + k)
-            delta = anti_windup_delta(uf, delta0)
-            # the integrator row of Phi~ (eq. 24) reads the nodes before the step
-            act = slice(0, (b + 1) * m)  # later moves have not acted yet: their columns are 0
-            I_free += delta * t_s * float(c @ d_free)
-            GI[act] += delta * t_s * (c @ Gd[:, act])
-            d_free = Phi @ d_free
-            Gd[:, act] = Phi @ Gd[:, act]
-            Gd[:, cols] += Gam
-            k += 1
+        Hess[b * m:(b + 1) * m, b * m:(b + 1) * m] += r0 * length * np.eye(m)
+    c = np.asarray(c_m, float)
+    t_s = plan.t_s
+    u_ff = np.array([plan.sample(j + k)[0] for k in range(H)])
+    deltas = np.array([anti_windup_delta(u, delta0) for u in u_ff])
+    Y, yf = np.empty((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
+    for k0, L, key in _segments(j, end, N, every):
+        powers = store.get(key)
+        if powers is None:
+            Phi, Gam = gains.linearisation(j + k0)
+            powers = store[key] = SegmentPowers.of(np.asarray(Phi, float), np.asarray(Gam, float), c, every)
+        Yseg = powers.rows[:L] @ Gd  # (L, nz)
+        yf[k0:k0 + L] = powers.rows[:L] @ d_free
+        for i in range(L - 1):  # the input of step k0 + i reaches the mean of the later steps
+            b = block_of[k0 + i]
+            Yseg[i + 1:, b * m:(b + 1) * m] += powers.c_gam[:L - 1 - i]
+        Y[k0:k0 + L] = Yseg
+        Gd = powers.Phi_pow[L] @ Gd
+        d_free = powers.Phi_pow[L] @ d_free
+        for i in range(L):
+            b = block_of[k0 + i]
+            Gd[:, b * m:(b + 1) * m] += powers.gam_pow[L - 1 - i]
+    # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
+    w_int = (deltas * t_s)[:, None]
+    GI = np.vstack([np.zeros((1, nz)), np.cumsum(w_int * Y, axis=0)])  # (H + 1, nz)
+    I_all = float(e0[n]) + np.concatenate([[0.0], np.cumsum(w_int[:, 0] * yf)])
+    # stage costs of x_1 .. x_H-1 (x_0 does not depend on z)
+    Ys, GIs = Y[1:], GI[1:H]
+    Hess += q0 * (Ys.T @ Ys) + q1 * (GIs.T @ GIs)
+    grad = q0 * (Ys.T @ yf[1:]) + q1 * (GIs.T @ I_all[1:H])
+    GI, I_free = GI[H], float(I_all[H])
     PT = gains.cost_to_go(end)
     G_full = np.vstack([Gd, GI[None, :]])
     x_free = np.append(d_free, I_free)
@@ -183,6 +236,8 @@ class MPCController(Controller):
     fallbacks: int = 0
     #: wall time of each sample's MPC (ms)
     step_ms: list[float] = field(default_factory=list)
+    #: the held linearisations' powers of this plan (condensed_qp's cache)
+    powers: dict[int, SegmentPowers] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.settings is None:
@@ -202,10 +257,12 @@ class MPCController(Controller):
         c_m = np.asarray(self.model.c_m, float)
         w = self.cfg.lqg
         Kj = self.gains.at(j)
+        for key in [k for k in self.powers if 0 <= k < j // self.gains.jacobian_every]:
+            del self.powers[key]  # stretches behind: ~1 MB each
         du = None
         for with_rates in (True, False):
             pred = condensed_qp(self.gains, self.plan, c_m, w.q0, w.q1, w.r0, w.delta0, j, e, self.u_prev,
-                                self.settings, with_rates)
+                                self.settings, with_rates, self.powers)
             res = self.solver.solve(pred.qp)
             if res.ok:
                 du = res.z[: u_ff.size]

@@ -225,6 +225,9 @@ def steady_state(model: DiscreteDynamics, u: ArrayLike, theta_guess: ArrayLike, 
     """
     uu = np.asarray(u, float)
     eye = np.eye(model.n)
+    # a model with c_p(T) (twin.control.plan_model.CapacityModel) has the steady states of its base model, where
+    # Newton does not meet the slopes of the c_p table's Curie peak
+    model = getattr(model, "base", model)
     # steps larger than 500 K in any node are damped: the T^4 terms make far Newton steps overshoot
     return damped_newton(
         lambda th: np.asarray(model.step(th, uu), float) - th,

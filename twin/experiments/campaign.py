@@ -27,7 +27,7 @@ from twin.config import FurnaceConfig
 from twin.experiments.model_error import MODEL_ERROR_KEYS
 from twin.limits import scenario_limits
 from twin.runs.metrics import METRIC_KEYS
-from twin.scenario import PAPER_ESTIMATOR, EstimatorSpec, Scenario, parse_scenario
+from twin.scenario import PAPER_ESTIMATOR, ControlSpec, EstimatorSpec, Scenario, parse_scenario
 
 if TYPE_CHECKING:
     from twin.experiments.run import SinkFactory
@@ -167,6 +167,9 @@ def run_campaign(
     truth_radiation: Any = None,
     figures: bool = True,
     estimator: str = "default",
+    feedback: str | None = None,
+    learnt: dict[tuple[str, int], Any] | None = None,
+    only: Iterable[str] | None = None,
 ) -> dict[str, Any]:
     """Run the six experiments, each with the seeds 0 .. seeds - 1; return the product.md ``campaign --json``
     object.  Each experiment's ``metrics`` are the worst over its seeds; ``model_error`` is the twin's model
@@ -174,7 +177,10 @@ def run_campaign(
 
     The seed drives the TC noise and (independent truth) the TC biases; runs that start from the same
     readings share their first plan.  ``figures=False`` skips each run's PNGs (the campaign's own stay).
-    ``estimator`` is a key of :data:`ESTIMATORS` (``default``: the scenario's own).
+    ``estimator`` is a key of :data:`ESTIMATORS` (``default``: the scenario's own).  ``feedback`` (``lqg`` /
+    ``mpc``, None: the furnace's ``[control] feedback``) is every run's ``control.feedback``; ``learnt`` maps
+    (experiment, seed) to the plan parameters a run starts from (a second run of the same recipe, issue 26);
+    ``only`` keeps the experiments of these names.
     """
     from twin.experiments.figures import plot_homogeneity_comparison
     from twin.experiments.model_error import open_loop_model_error
@@ -199,12 +205,17 @@ def run_campaign(
     out.mkdir(parents=True, exist_ok=True)
     experiments: list[dict[str, Any]] = []
     series: dict[str, Any] = {}
+    wanted = None if only is None else set(only)
     for name, base in campaign_scenarios(cfg, t_E):
+        if wanted is not None and name not in wanted:
+            continue
         runs: list[dict[str, Any]] = []
         for seed in range(seeds):
             update: dict[str, Any] = {"seed": seed, "truth": truth}
             if chosen is not None:
                 update["estimator"] = chosen
+            plan_parameters = None if learnt is None else learnt.get((name, seed))
+            update["control"] = ControlSpec(feedback=feedback, plan_parameters=plan_parameters)  # type: ignore[arg-type]
             scenario = base.model_copy(update=update)
             log.info("campaign: %s, seed %d (truth %s, %s estimator)", name, seed, truth, estimator)
             folder = out / name / f"seed_{seed}"
@@ -230,12 +241,14 @@ def run_campaign(
         })
     pairs = [
         (f"TC4 at ({x:g} L_s, {y:g} W_s)", series[f"fixed_tc4_{x:g}"], series[f"oscillating_tc4_{x:g}"])
-        for x, y in TC4_POSITIONS
+        for x, y in TC4_POSITIONS if f"fixed_tc4_{x:g}" in series and f"oscillating_tc4_{x:g}" in series
     ]
-    plot_homogeneity_comparison(pairs, out / "homogeneity.png")
+    if pairs:
+        plot_homogeneity_comparison(pairs, out / "homogeneity.png")
     spec = (chosen if chosen is not None else base.estimator).model_dump(mode="json")
     result = {"experiments": experiments, "paper": PAPER, "truth": truth, "seeds": list(range(seeds)),
-              "estimator": {"name": estimator, **spec}}
+              "estimator": {"name": estimator, **spec},
+              "controller": feedback or cfg.control.feedback, "planned_from_first_run": learnt is not None}
     (out / "campaign.json").write_text(json.dumps(result, indent=2))
     (out / "campaign.md").write_text(campaign_report(result, t_E))
     return result
@@ -262,14 +275,35 @@ def campaign_report(result: dict[str, Any], t_E: float) -> str:
     if "paper_estimator" in result:
         text += ("\n## The paper's estimator beside the default (worst over the seeds: paper -> default)\n\n"
                  + comparison_table(result["paper_estimator"]["experiments"], ex) + "\n")
+    if "mpc" in result:
+        text += ("\n## The MPC beside the LQG (worst over the seeds: LQG -> MPC)\n\n"
+                 + comparison_table(ex, result["mpc"]["experiments"]) + "\n")
+    for key, words in (("second_run", result.get("controller", "")), ("mpc_second_run", "mpc")):
+        if key in result:
+            first = ex if key == "second_run" else result["mpc"]["experiments"]
+            text += (f"\n## A second run of each recipe ({words}), planned with what the first learnt "
+                     "(worst over the seeds: first -> second)\n\n"
+                     + comparison_table(first, result[key]["experiments"]) + "\n")
     return text
+
+
+def learnt_from(result: dict[str, Any], cfg: FurnaceConfig) -> dict[tuple[str, int], Any]:
+    """(experiment, seed) -> the plan parameters its run learnt (``[control] plan_learns``; the calibration memory's
+    rule, :func:`twin.control.calibration_memory.learnt_parameters`)."""
+    from twin.control.calibration_memory import learnt_parameters
+
+    out: dict[tuple[str, int], Any] = {}
+    for e in result["experiments"]:
+        for s in e["seeds"]:
+            out[(e["name"], int(s["seed"]))] = learnt_parameters(s["metrics"].get("calibration"), cfg)
+    return out
 
 
 def comparison_table(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> str:
     """Markdown table of each metric per experiment as ``before -> after`` (each marked ✗ above its bound),
     plus the true field's transient mean error (held to the estimated one's bound) and the TC4 error's
     component at the oscillation frequency for the oscillating experiments."""
-    keys = [*METRIC_KEYS, "true_mean_error_transient_max", "tc4_error_oscillation_amplitude"]
+    keys = [*METRIC_KEYS, "true_mean_error_transient_max", "tc4_error_oscillation_amplitude", "full_power_steady_max"]
     rows = ["| metric | " + " | ".join(e["name"] for e in after) + " |", "|" + "---|" * (1 + len(after))]
     for key in keys:
         cells = [key]
@@ -295,11 +329,27 @@ def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[Sin
     out = Path(args.out)
     which = getattr(args, "estimator", "default")
     first = "default" if which == "both" else which
-    result = run_campaign(cfg, out, t_E, sink_factories=sink_factories, seeds=args.seeds, truth=args.truth,
-                          estimator=first)
+    controller = getattr(args, "controller", "default")
+    calibration = getattr(args, "calibration", "none")
+    only = getattr(args, "experiments", None)
+    feedback = None if controller in ("default", "both") else controller
+    if controller == "both":
+        feedback = "lqg"
+    common: dict[str, Any] = {"sink_factories": sink_factories, "seeds": args.seeds, "truth": args.truth, "only": only}
+    result = run_campaign(cfg, out, t_E, estimator=first, feedback=feedback, **common)
     if which == "both":  # the paper's estimator on the same plants and seeds, beside the default
-        result["paper_estimator"] = run_campaign(cfg, out / "paper_estimator", t_E, sink_factories=sink_factories,
-                                                 seeds=args.seeds, truth=args.truth, estimator="paper")
+        result["paper_estimator"] = run_campaign(cfg, out / "paper_estimator", t_E, estimator="paper",
+                                                 feedback=feedback, **common)
+    if controller == "both":  # the MPC on the same plants and seeds, beside the LQG
+        result["mpc"] = run_campaign(cfg, out / "mpc", t_E, estimator=first, feedback="mpc", **common)
+    if calibration == "learn":  # each run again, its plan from what the first run of its recipe learnt
+        for key, folder in (("second_run", "second_run"), ("mpc_second_run", "mpc/second_run")):
+            base = result if key == "second_run" else result.get("mpc")
+            if base is None:
+                continue
+            result[key] = run_campaign(cfg, out / folder, t_E, estimator=first, feedback=base["controller"],
+                                       learnt=learnt_from(base, cfg), **common)
+    if which == "both" or controller == "both" or calibration == "learn":
         (out / "campaign.json").write_text(json.dumps(result, indent=2))
         (out / "campaign.md").write_text(campaign_report(result, t_E))
     if args.json:

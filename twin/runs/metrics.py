@@ -61,6 +61,8 @@ METRIC_KEYS = (
     "true_mean_error_steady_max",
     "field_estimation_error_steady_max",
 )
+#: a group at or above this fraction of u_max counts as at full power
+FULL_POWER = 0.999
 #: the estimator outputs a shadow estimator records under ``shadow_<key>`` (twin.runs.record)
 SHADOW_OUTPUTS = ("T_mean_hat", "tc_hat", "field_hat")
 
@@ -305,8 +307,12 @@ def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np
     furnace's, is added before): ``tc4_error_oscillation_amplitude`` (an oscillating
     run: the amplitude of the signed TC4 error's component at the oscillation frequency over the steady
     window, relative),
-    ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run) and ``shadow`` (the shadow
-    estimator's metrics)."""
+    ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run), ``shadow`` (the shadow
+    estimator's metrics) and ``full_power_steady_max`` (the largest fraction of the steady window any lamp group
+    spends at full power, u >= :data:`FULL_POWER`)."""
+    if "u" in ts and st.any():  # issue 26: no lamp group at full power for long in the steady window
+        u_st = np.asarray(ts["u"], float)[st]
+        out["full_power_steady_max"] = float(np.max(np.mean(u_st >= FULL_POWER, axis=0)))
     period = _oscillation_period(ts)
     if period is not None and t.size:
         # of the signed error: |e| of an error oscillating about zero has no component at the frequency
