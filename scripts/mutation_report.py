@@ -161,7 +161,7 @@ def equivalence(name: str, diff: str, by_name: dict[str, dict[str, Any]], rules:
     return None
 
 
-def report(out: Path) -> float:
+def report(out: Path, summary: Path | None = None) -> float:
     results = load_results()
     by_name, rules = load_equivalents()
     rows, details = [], []
@@ -222,7 +222,17 @@ def report(out: Path) -> float:
     ])
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
+    if summary is not None:  # the scores without the diffs: what the documentation keeps
+        head = text.split("\n## Mutants not killed")[0].replace("# Mutation report of the numerics", "# Mutation testing")
+        summary.write_text(head.rstrip() + "\n\n" + SUMMARY_TAIL)
     return score
+
+
+SUMMARY_TAIL = (
+    "The full report, with every mutant not killed, its diff and why it is equivalent (about 4,400 lines), is an\n"
+    "artifact of the run: `test-artifacts/mutation-report.md` (not committed; `bash scripts/mutation.sh\n"
+    "--report-only` writes it again from `./mutants`).\n"
+)
 
 
 def main() -> int:
@@ -231,6 +241,7 @@ def main() -> int:
     ap.add_argument("--not-killed", action="store_true", help="print the names of the mutants not killed")
     ap.add_argument("--skip-equivalent", action="store_true", help="with --not-killed: leave out the equivalent ones")
     ap.add_argument("--out", type=Path, help="write the report here")
+    ap.add_argument("--summary", type=Path, help="with --out: also the scores alone, here (docs/mutation.md)")
     a = ap.parse_args()
     if a.scope:
         print(" ".join(scope_globs()))  # noqa: T201
@@ -244,7 +255,7 @@ def main() -> int:
         names += [g for g in scope_globs() if g.split(".x")[0].removesuffix(".*") not in results]
         print(" ".join(sorted(names)))  # noqa: T201
     elif a.out:
-        score = report(a.out)
+        score = report(a.out, a.summary)
         print(f"score {100 * score:.1f} %", file=sys.stderr)  # noqa: T201
     else:
         ap.print_help()

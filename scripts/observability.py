@@ -11,7 +11,7 @@ F = sum_j (C S_j)^T (C S_j) / r0.  Its inverse bounds the parameters' standard d
 and its normalised form gives their correlations: two parameters the TCs cannot tell apart correlate
 near +-1.  Split into the heat-up and the hold, it shows which pairs stay apart once the furnace holds
 (where a slowly drifting parameter has to be tracked).  ``python scripts/observability.py
-[--config banded]`` prints it (the README's choice of calibrated parameters comes from it).
+[--config banded]`` prints it (docs/estimation.md's choice of calibrated parameters comes from it).
 
 Example
 -------

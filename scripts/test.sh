@@ -15,6 +15,7 @@ if ! command -v chromium >/dev/null 2>&1; then
 fi
 .venv/bin/ruff check twin backend benchmarks furnace_twin tests
 .venv/bin/mypy
+NO_MKDOCS_2_WARNING=1 .venv/bin/mkdocs build --strict --quiet  # the documentation site (mkdocs.yml)
 export MPLBACKEND=Agg
 # the 25 slowest tests at the end of every run (the suite's 15-minute budget on 2 cores)
 .venv/bin/python -m pytest -n 2 --dist loadfile -q --durations=25 "$@"

@@ -1,7 +1,8 @@
 """A fixed handful of planted bugs that the suite must catch (the CI part of the mutation testing).
 
-The full mutation run (``bash scripts/mutation.sh``, report in docs/mutation-report.md) takes too long
-for CI.  These mutants are the ones that matter most: the four one-line bugs that once survived the
+The full mutation run (``bash scripts/mutation.sh``, scores in docs/mutation.md, the full report in
+test-artifacts/) takes too long for CI.  These mutants are the ones that matter most: the four one-line bugs
+that once survived the
 whole suite (the EKF's measurement gate, both anti-windup conditions, a run metric's window), places
 mutmut does not mutate (decorated functions: the FE matrices; the net-radiation algebra outside its
 scope) and the integrators and the model Jacobian, whose full mutation run is the longest.  Each is

@@ -226,7 +226,7 @@ class EstimatorChoice(_Model):
     """How the twin estimates (issue 11): the model's motion and whether it calibrates parameters.
 
     ``motion="averaged", calibrate=False`` is the paper's EKF (section 3.2, eq. 11); the defaults are
-    the best measured configuration (README, campaign).
+    the best measured configuration (docs/estimation.md, campaign).
     """
 
     motion: Literal["averaged", "position_aware"] = Field(

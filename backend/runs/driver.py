@@ -1,7 +1,7 @@
 """Each run's asyncio task: build, step at speed, publish frames, finalise (``backend.runs.manager``).
 
-:class:`RunDriver` is the part of :class:`backend.runs.manager.RunManager` (which mixes it in) that drives
-one run: :meth:`RunDriver._drive` waits (as ``queued``) for the radiation model, checks a run posted
+:class:`RunDriver` is held by :class:`backend.runs.manager.RunManager` (``manager.driver``) and drives
+each run: :meth:`RunDriver.drive` waits (as ``queued``) for the radiation model, checks a run posted
 during the warm-up, builds the loop, then hands :meth:`backend.runs.worker.RunWorker.advance` to the run's
 own single-thread executor (the numerics never run on the event loop), publishes the latest snapshot as
 a stream frame (at most ``stream_max_hz`` per second; every sample when they come slower), sleeps until
@@ -16,7 +16,6 @@ import concurrent.futures
 import logging
 import time
 from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from backend.core.settings import Settings
@@ -56,17 +55,13 @@ class ActiveRun:
 
 
 class RunDriver:
-    """The runs' tasks of a server (``backend.runs.manager.RunManager`` mixes it in)."""
+    """The runs' tasks of a server; ``runs`` and ``last_frames`` are the manager's, shared with it."""
 
-    settings: Settings
-    cfg: FurnaceConfig
-    checks: RunChecks
-    loop_factory: LoopFactory
-    _repo: RunRepository
-    _runs: dict[str, ActiveRun]
-    _last_frames: OrderedDict[str, str]
-    _shutting_down: bool
-    model_ready: Callable[[], bool]  # RunManager's: the loop factory can build a run now
+    def __init__(self, settings: Settings, cfg: FurnaceConfig, checks: RunChecks, loop_factory: LoopFactory,
+                 repo: RunRepository, runs: dict[str, ActiveRun], last_frames: OrderedDict[str, str]) -> None:
+        self.settings, self.cfg, self.checks, self.loop_factory = settings, cfg, checks, loop_factory
+        self._repo, self._runs, self._last_frames = repo, runs, last_frames
+        self.shutting_down = False  #: set by the manager's shutdown: runs stopped now end ``interrupted``
 
     def _set_status(self, run_id: str, run: ActiveRun, status: str, error: str | None = None) -> None:
         run.status = status
@@ -90,7 +85,7 @@ class RunDriver:
         run.published_seq = w.seq
         run.hub.publish(self._frame(run_id, run, w.latest, w.seq, w.latest_wall, run.status))
 
-    async def _drive(self, run_id: str, run: ActiveRun) -> None:
+    async def drive(self, run_id: str, run: ActiveRun) -> None:
         """The run's task: build, step at speed, publish, finalise."""
         aio = asyncio.get_running_loop()
         w = run.worker
@@ -128,8 +123,8 @@ class RunDriver:
                 if adv.finished:
                     break
                 if w.stop_requested.is_set():
-                    final = "interrupted" if self._shutting_down else "stopped"
-                    error = "the server shut down during the run" if self._shutting_down else None
+                    final = "interrupted" if self.shutting_down else "stopped"
+                    error = "the server shut down during the run" if self.shutting_down else None
                     break
                 wait = adv.wait_s
                 if pending:
@@ -143,8 +138,8 @@ class RunDriver:
                 else:
                     await asyncio.sleep(0)  # let the websockets send
         except _StoppedWhileQueued:
-            final = "interrupted" if self._shutting_down else "stopped"
-            error = "the server shut down before the run started" if self._shutting_down else None
+            final = "interrupted" if self.shutting_down else "stopped"
+            error = "the server shut down before the run started" if self.shutting_down else None
         except LimitExceeded as exc:  # the reference, checked once the model was ready
             final, error = "error", str(exc)
         except asyncio.CancelledError:
@@ -152,8 +147,8 @@ class RunDriver:
             error = "the server shut down during the run"
             raise
         except PlanCancelled:  # stopped (or shut down) while the first plan was being made
-            final = "interrupted" if self._shutting_down else "stopped"
-            error = "the server shut down during the run" if self._shutting_down else None
+            final = "interrupted" if self.shutting_down else "stopped"
+            error = "the server shut down during the run" if self.shutting_down else None
         except FurnaceLost as exc:  # its data so far is kept (finalize below), the lamps commanded off if possible
             log.error("run %s: furnace lost: %s", run_id, exc)
             final, error = "plant_lost", str(exc)
@@ -183,7 +178,7 @@ class RunDriver:
 
     async def _wait_for_model(self, run: ActiveRun) -> bool:
         """Wait (as ``queued``) until the radiation model is ready; False if the run was stopped meanwhile."""
-        if self.model_ready():
+        if self.loop_factory.ready(self.cfg):
             return True
         log.info("run waits for the radiation model")
         while not run.worker.stop_requested.is_set():

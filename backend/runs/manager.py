@@ -1,6 +1,6 @@
 """The run manager: starts, drives, changes and stops the runs of the server.
 
-Each run is an asyncio task (:meth:`RunManager._drive`) on the server's event loop.  The
+Each run is an asyncio task (:meth:`backend.runs.driver.RunDriver.drive`) on the server's event loop.  The
 numerics never run on the event loop: the task hands :meth:`RunWorker.advance` to the
 run's own single-thread executor, then publishes the latest snapshot as a stream frame
 (at most ``stream_max_hz`` per second) and sleeps until the next sample is due
@@ -60,7 +60,7 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 
-class RunManager(RunDriver):
+class RunManager:
     """All runs of one server; call its coroutines on the server's event loop."""
 
     def __init__(
@@ -82,11 +82,12 @@ class RunManager(RunDriver):
         self._runs: dict[str, ActiveRun] = {}
         self._last_frames: OrderedDict[str, str] = OrderedDict()
         self._loop = event_loop
-        self._shutting_down = False
         #: where runs stream their recording live (``--rerun-connect``, or the server's rerun web viewer)
         self.live_url: str | None = settings.rerun_connect
         self._requests: StartRequests[Started] = StartRequests()  # a repeated POST gets the same run
         self.checks = RunChecks(cfg, self.limits, settings, self.loop_factory)
+        #: each run's task (build, step at speed, publish frames, finalise)
+        self.driver = RunDriver(settings, cfg, self.checks, self.loop_factory, repo, self._runs, self._last_frames)
         #: the data directory's usage, quota, free space and retention (backend.storage.data_dir)
         self.disk = DataDir(settings.data_dir, settings.data_quota_mb, settings.min_free_mb, settings.retention_days)
 
@@ -165,7 +166,7 @@ class RunManager(RunDriver):
             checked=checked,
         )
         self._runs[run_id] = run
-        run.task = asyncio.create_task(self._drive(run_id, run), name=f"run-{run_id}")
+        run.task = asyncio.create_task(self.driver.drive(run_id, run), name=f"run-{run_id}")
         log.info("run %s started: %s", run_id, scenario.to_json())
         return Started(run_id, notes)
 
@@ -348,7 +349,7 @@ class RunManager(RunDriver):
 
     async def shutdown(self, timeout: float = 30.0) -> None:
         """Stop every run and wait for its final flush (server shutdown)."""
-        self._shutting_down = True
+        self.driver.shutting_down = True
         tasks = []
         for run in list(self._runs.values()):
             run.worker.stop_requested.set()

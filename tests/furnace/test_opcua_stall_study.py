@@ -1,4 +1,4 @@
-"""The figures of README's "The transport tested exactly" (the 1.301 % CI run explained) from
+"""The figures of docs/opcua.md's "The transport tested exactly" (the 1.301 % CI run explained) from
 ``scripts/opcua_stall.py``: the bold ones of its table, recomputed in process (small furnace, about 1 s each)."""
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from opcua_stall import steady_error  # noqa: E402
 
 
 def readme_row() -> list[str]:
-    text = (REPO / "README.md").read_text()
+    text = (REPO / "docs" / "opcua.md").read_text()
     row = re.search(r"^\| steady mean error, % of the setpoint \|(.+)\|$", text, re.M)
-    assert row is not None, "README lost the stall table"
+    assert row is not None, "docs/opcua.md lost the stall table"
     return [c.strip() for c in row.group(1).split("|")]
 
 

@@ -165,7 +165,7 @@ def test_study_file_toml(tmp_path):
 
 @pytest.mark.parametrize("path", sorted((Path(__file__).parents[2] / "studies").glob("*.toml")), ids=lambda p: p.stem)
 def test_every_shipped_study_expands_against_its_furnace(path):
-    """The study files in studies/ (the README's examples and the speed study) load and expand: every field
+    """The study files in studies/ (docs/studies.md's examples and the speed study) load and expand: every field
     path exists and every value is within the limits of the furnace the file names."""
     from twin.config import load_config
 
