@@ -10,7 +10,7 @@
 | closed_loop_rtf_paper, step_ms_paper | the same with the paper's estimator (averaged, no calibration) |
 | closed_loop_speed_ratio | closed_loop_rtf / closed_loop_rtf_paper (target >= 0.8) |
 | closed_loop_rtf_lqg, step_ms_lqg | the same with the paper's LQG feedback (default estimator) |
-| mpc_step_ms_p50, mpc_step_ms_p99 | the MPC's time per sample (condensing + QP), when the furnace's feedback is the MPC |
+| mpc_step_ms_p50, mpc_step_ms_p99 | the MPC's time per sample (condensing + QP), when the feedback is the MPC |
 | closed_loop_rtf_mpc_over_lqg | closed_loop_rtf / closed_loop_rtf_lqg (issue 26: at least 0.5) |
 | ocp_s | feedforward OCP solve for a whole run |
 | replan_s | re-plan after a reference change, warm-started |
