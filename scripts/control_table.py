@@ -141,10 +141,10 @@ def table(out: Path) -> str:
         second = group.endswith("-second")
         variant = group.removesuffix("-second")
         words = {"paper": "paper (LQG, constant c_p, no reserve)"}.get(variant, variant)
-        if variant == "twin":
-            c = runs[0]["controller"]
+        c = runs[0].get("controller") or {}
+        if variant != "paper" and c:
             cp = "c_p(T)" if c["plan_heat_capacity"] == "temperature" else "constant c_p"
-            words = f"twin: {c['feedback'].upper()}, {cp}, limit {c['feedforward_limit']:g}"
+            words = f"{variant}: {c['feedback'].upper()}, {cp}, limit {c['feedforward_limit']:g}"
         if second:
             words += ", 2nd run (learnt)"
         cells = [furnace, words, ",".join(str(r["seed"]) for r in runs)]
