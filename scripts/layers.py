@@ -45,7 +45,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("twin.user_files",),
     ("twin.scenario",),
     ("twin.limits",),
-    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin.jsonable"),
+    ("twin.config", "twin.events", "twin.event_words", "twin.endpoints", "twin.numerics", "twin.jsonable"),
 )
 
 
