@@ -48,7 +48,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("twin.user_files",),
     ("twin.scenario",),
     ("twin.limits",),
-    ("twin.config", "twin.events", "twin.event_words", "twin.endpoints", "twin.numerics", "twin.jsonable"),
+    ("twin.config", "twin.events", "twin.endpoints", "twin.numerics", "twin.jsonable"),
+    ("twin.event_words",),  # the words of the events (twin.events renders them; they import nothing of twin)
 )
 
 

@@ -20,10 +20,21 @@ an older record; a few jargon phrases are put plainly).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    from twin.events import RunEvent
+
+class Event(Protocol):
+    """What the words need of an event (:class:`twin.events.RunEvent` has it; this module does not import
+    it, so the words stay below the events in the layers)."""
+
+    @property
+    def t(self) -> float: ...
+
+    @property
+    def kind(self) -> str: ...
+
+    @property
+    def data(self) -> dict[str, Any]: ...
 
 #: what a run's end is called
 END_WORDS = {"finished": "run finished", "stopped": "run stopped", "interrupted": "run interrupted",
@@ -79,7 +90,7 @@ WORDS: dict[str, Callable[[float, dict[str, Any]], str]] = {
 }
 
 
-def words(event: RunEvent) -> str:
+def words(event: Event) -> str:
     """The sentence of ``event`` (an unknown kind: its kind and data, so nothing is lost)."""
     say = WORDS.get(event.kind)
     return say(event.t, event.data) if say is not None else f"{event.kind}: {event.data}"
