@@ -100,7 +100,9 @@ def test_banded_furnace_is_the_default_with_five_lamp_values_changed(cfg):
     assert changed == {"lamps.rated_power", "lamps.horizontal.heated_length", "lamps.horizontal.distance",
                        "lamps.vertical.heated_length", "lamps.vertical.distance",
                        # and how the twin controls it (issue 26, [control] of banded_furnace.toml)
-                       "control.plan_heat_capacity", "control.feedforward_limit", "control.feedback"}
+                       "control.plan_heat_capacity", "control.feedforward_limit", "control.feedback",
+                       # and its own measured model error for the reported covariance (issue 25)
+                       "ekf.model_error.q0", "ekf.model_error.q1", "ekf.model_error.representation_rms"}
     assert banded.lamps.horizontal.distance < cfg.lamps.horizontal.distance  # the point of the variant
     assert load_config("default") == cfg
 

@@ -25,6 +25,7 @@ Example
 
 from __future__ import annotations
 
+import hashlib
 import json
 from typing import Annotated, Any, Literal
 
@@ -438,3 +439,25 @@ def describe(value: TransitionReference | PointsReference | OscillationSpec | li
         more = f", … ({len(pts)} points)" if len(pts) > 4 else ""
         return "points " + ", ".join(pts[:4]) + more
     return f"{value.setpoint:g} K in {value.t_E:g} s"
+
+
+def plant_key(scenario: Scenario) -> str:
+    """Which plant a run drives (the key of its calibration memory, twin.control.calibration_memory):
+    ``simulated-<truth>[-mismatch hash]`` or ``opcua-<endpoint hash>``."""
+    plant = scenario.plant
+    if plant.kind == "opcua":
+        return "opcua-" + hashlib.sha256(plant.endpoint.encode()).hexdigest()[:10]
+    mismatch = scenario.mismatch.model_dump()
+    tail = "" if not any(mismatch.values()) else "-" + hashlib.sha256(
+        json.dumps(mismatch, sort_keys=True).encode()).hexdigest()[:8]
+    return f"simulated-{scenario.truth}{tail}"
+
+
+def plant_label(scenario: Scenario) -> str:
+    """The plant in words for the dashboard."""
+    plant = scenario.plant
+    if plant.kind == "opcua":
+        return f"furnace at {plant.endpoint}"
+    mismatch = {k: v for k, v in scenario.mismatch.model_dump().items() if v}
+    words = "its own truth" if scenario.truth == "independent" else "the model's own tables"
+    return f"simulated furnace ({words}{', mismatch ' + str(mismatch) if mismatch else ''})"

@@ -23,6 +23,10 @@ TEST_CACHE = REPO / ".cache" / "test-radiation"
 
 # small_config() as a furnace file (the emulator subprocess and the CLI take --config FILE)
 SMALL_TOML = """base = "default"
+[control]
+feedback = "lqg"
+plan_heat_capacity = "constant"
+feedforward_limit = 1.0
 [radiation]
 rays_per_specimen_cell = 400
 rays_per_lamp = 8000

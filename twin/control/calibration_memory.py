@@ -30,7 +30,6 @@ True
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import math
@@ -41,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
-from twin.scenario import PlanParameters, Scenario
+from twin.scenario import PlanParameters, Scenario, plant_key, plant_label
 
 log = logging.getLogger(__name__)
 
@@ -58,27 +57,6 @@ VERSION = 1
 def furnace_key(cfg: FurnaceConfig) -> str:
     """The furnace file's physics as a short hash."""
     return cfg.digest(*PHYSICAL_SECTIONS)
-
-
-def plant_key(scenario: Scenario) -> str:
-    """Which plant a run drives: ``simulated-<truth>[-mismatch hash]`` or ``opcua-<endpoint hash>``."""
-    plant = scenario.plant
-    if plant.kind == "opcua":
-        return "opcua-" + hashlib.sha256(plant.endpoint.encode()).hexdigest()[:10]
-    mismatch = scenario.mismatch.model_dump()
-    tail = "" if not any(mismatch.values()) else "-" + hashlib.sha256(
-        json.dumps(mismatch, sort_keys=True).encode()).hexdigest()[:8]
-    return f"simulated-{scenario.truth}{tail}"
-
-
-def plant_label(scenario: Scenario) -> str:
-    """The plant in words for the dashboard."""
-    plant = scenario.plant
-    if plant.kind == "opcua":
-        return f"furnace at {plant.endpoint}"
-    mismatch = {k: v for k, v in scenario.mismatch.model_dump().items() if v}
-    words = "its own truth" if scenario.truth == "independent" else "the model's own tables"
-    return f"simulated furnace ({words}{', mismatch ' + str(mismatch) if mismatch else ''})"
 
 
 class CalibrationMemory:
