@@ -44,13 +44,13 @@ function meanFigure(s) {
   const pts = referenceMarkers(state.run);
   const w = windowShapes(windows(), tMax(s));
   return {
-    data: [
-      ...meanBand(s),
+    data: [ // the band last: traces 0-2 keep their places (reference, estimate, points)
       { x: s.t, y: s.T_ref, name: "reference T_ref", line: { color: "#111", dash: "dash", width: 1.6 } },
       { x: s.t, y: s.T_mean_hat, name: "fillet mean (estimate)", line: { color: "#d62728", width: 1.8 } },
       { x: pts.x, y: pts.y, name: "reference points", mode: "markers", showlegend: pts.x.length > 0,
         marker: { symbol: "circle-open", size: 8, color: "#111", line: { width: 1.6 } },
         hovertemplate: "%{x:.1f} s, %{y:.0f} K<extra>reference point</extra>" },
+      ...meanBand(s),
     ],
     layout: baseLayout("T (K)", { shapes: w.shapes, annotations: w.annotations }),
   };

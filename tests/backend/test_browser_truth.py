@@ -114,7 +114,8 @@ def test_the_run_card_shows_100_times_metrics_json(finished_runs, browser, artif
                 (key, kelvin, value)
             checked += 1
         assert checked >= 10, checked  # every table metric of product.md with a value
-        cal = page.inner_text("#run-metrics .note:last-child")
+        # the calibration's note (the uncertainty's note follows it)
+        cal = next(n for n in page.locator("#run-metrics .note").all_inner_texts() if n.startswith("calibrated"))
         for name, p in saved.get("calibration", {}).items():  # the learned parameters, in % of the model's
             words = name.replace("_", " ")
             shown = cal.split(words, 1)[1]
