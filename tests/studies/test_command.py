@@ -34,7 +34,9 @@ def small_furnace(tmp_path) -> Path:
     f.write_text(f'base = "{DEFAULT_CONFIG_PATH}"\n[radiation]\nrays_per_specimen_cell = 400\nrays_per_lamp = 8000\n'
                  "rays_per_wall = 4000\n[oscillation]\npositions = 5\n"
                  # the truth's own table as small_config() has it (twin.config.small_config)
-                 "[truth.radiation]\nrays_per_specimen_cell = 800\nrays_per_lamp = 16000\nrays_per_wall = 8000\n")
+                 "[truth.radiation]\nrays_per_specimen_cell = 800\nrays_per_lamp = 16000\nrays_per_wall = 8000\n"
+                 # and the paper's controller, as small_config() has it
+                 '[control]\nfeedback = "lqg"\nplan_heat_capacity = "constant"\nfeedforward_limit = 1.0\n')
     from twin.config import load_config
 
     assert load_config(f).digest() == small_config().digest()
