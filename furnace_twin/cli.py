@@ -147,6 +147,7 @@ def _recording_sink(cfg: Any) -> Any:
     def make(out: Any, loop: Any) -> Any:
         from backend.storage.recording import RecordingSink
 
+        out.mkdir(parents=True, exist_ok=True)  # the sinks are made before the run's folder writes its first file
         return RecordingSink(
             cfg, out.name or "run", out / "recording.rrd", tc_positions=[tuple(p) for p in loop.tc_positions]
         )
