@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import logging
 import re
 import signal
 import subprocess
@@ -29,6 +30,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -120,7 +122,21 @@ def _event_times(npz) -> list[tuple[float, str]]:
     return [(float(t), str(e)) for t, e in zip(npz["event_t"], npz["event_text"], strict=True)]
 
 
-def test_the_twin_drives_a_third_party_furnace_through_a_restart_and_serves_its_results(tmp_path) -> None:
+#: the furnace's server is killed at this run time; before it, nothing the test does disturbs the run
+KILL_AT = 10.0
+
+
+def _timing_disturbed_before_the_outages(events: list[tuple[float, str]]) -> list[str]:
+    """What says the machine, not the test, disturbed the real-time run before the first outage: late samples
+    or a TC dropout before :data:`KILL_AT` (on a quiet machine there are none; in CI with a busy neighbour on the
+    other core the o6 furnace's first readings came a second late and its restart's readings 2.6 s late)."""
+    return [e for t, e in events if t < KILL_AT and ("late" in e or "dropout" in e)]
+
+
+def _drive_through_restart(tmp_path: Path) -> tuple[dict, list[tuple[float, str]], dict, dict, dict, Any, str]:
+    """One run of the third-party furnace scenario: (final status, events, the first and second furnace's
+    namespaces, what the o6 client read of the twin, the timeseries, the run id)."""
+    tmp_path.mkdir()
     port, results_port = free_port(), free_port()
     state, mapping = tmp_path / "furnace-state.json", tmp_path / "lab.toml"
     mapping.write_text(LAB_MAPPING)
@@ -145,7 +161,7 @@ def test_the_twin_drives_a_third_party_furnace_through_a_restart_and_serves_its_
 
         at(6.0)
         served = o6_client("results", results, "--seconds", "1.5")  # an independent SCADA reads the twin
-        at(10.0)
+        at(KILL_AT)
         furnace.kill()  # the furnace's OPC UA server dies; the furnace cools with its lamps off
         furnace.wait(10)
         time.sleep(2.0)
@@ -159,7 +175,19 @@ def test_the_twin_drives_a_third_party_furnace_through_a_restart_and_serves_its_
                 time.sleep(0.1)
                 body = c.get(f"/api/runs/{run_id}").json()
         npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
-    events = _event_times(npz)
+    return body, _event_times(npz), first, second, served, npz, run_id
+
+
+def test_the_twin_drives_a_third_party_furnace_through_a_restart_and_serves_its_results(tmp_path) -> None:
+    """Judged on a run whose timing only the test's outages disturbed: a run the machine disturbed before them
+    (see :func:`_timing_disturbed_before_the_outages`) is said in the log and run once more."""
+    for attempt in (1, 2):
+        body, events, first, second, served, npz, run_id = _drive_through_restart(tmp_path / f"attempt{attempt}")
+        disturbed = _timing_disturbed_before_the_outages(events)
+        if not disturbed or attempt == 2:
+            break
+        logging.getLogger(__name__).warning("the machine disturbed the real-time run before its outages (%s); "
+                                            "once more", disturbed[:3])
     texts = [e for _, e in events]
     assert body["status"] == "finished", (body, texts)
     assert first["namespace_index"] != second["namespace_index"]  # found again by URI (nsu=), not by number
