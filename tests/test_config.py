@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from twin.config import DEFAULT_CONFIG_PATH, ConfigError, load_config, small_config
+from twin.config import DEFAULT_CONFIG_PATH, SMALL_OVERRIDES, ConfigError, load_config, small_config, small_config_toml
 
 
 @pytest.fixture(scope="module")
@@ -79,6 +79,15 @@ def test_small_config_changes_only_the_cost(cfg):
     assert small.specimen == cfg.specimen and small.lamps == cfg.lamps
     assert small.radiation.rays_per_lamp < cfg.radiation.rays_per_lamp
     assert small.digest() != cfg.digest() and small.digest("specimen") == cfg.digest("specimen")
+
+
+def test_small_config_as_a_file_is_small_config(tmp_path, cfg):
+    """The furnace file subprocesses get (the emulator, the study CLI): the same digest, so the same cached tables;
+    every override in it, nested tables too (``truth.radiation``)."""
+    f = tmp_path / "small.toml"
+    f.write_text(small_config_toml())
+    assert load_config(f).digest() == small_config().digest() != cfg.digest()
+    assert load_config(f).truth.radiation.rays_per_lamp == SMALL_OVERRIDES["truth.radiation.rays_per_lamp"]
 
 
 def test_lamp_flux_scale(cfg):

@@ -21,31 +21,14 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[2]
 TEST_CACHE = REPO / ".cache" / "test-radiation"
 
-# small_config() as a furnace file (the emulator subprocess and the CLI take --config FILE)
-SMALL_TOML = """base = "default"
-[control]
-feedback = "lqg"
-plan_heat_capacity = "constant"
-feedforward_limit = 1.0
-[radiation]
-rays_per_specimen_cell = 400
-rays_per_lamp = 8000
-rays_per_wall = 4000
-[oscillation]
-positions = 5
-[truth.radiation]
-rays_per_specimen_cell = 800
-rays_per_lamp = 16000
-rays_per_wall = 8000
-"""
-
 
 def small_config_file(folder: Path) -> Path:
-    from twin.config import load_config, small_config
+    """small_config() as a furnace file (the emulator subprocess and the CLI take --config FILE)."""
+    from twin.config import load_config, small_config, small_config_toml
 
     path = folder / "small_furnace.toml"
-    path.write_text(SMALL_TOML)
-    assert load_config(path).digest() == small_config().digest(), "SMALL_TOML drifted from small_config()"
+    path.write_text(small_config_toml())
+    assert load_config(path).digest() == small_config().digest()
     return path
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from furnace_twin.cli import build_parser, main
-from twin.config import DEFAULT_CONFIG_PATH, small_config
+from twin.config import small_config, small_config_toml
 
 DASK = str(Path(sys.executable).with_name("dask"))
 
@@ -31,12 +31,7 @@ def _free_port() -> int:
 def small_furnace(tmp_path) -> Path:
     """``small_config()`` as a furnace file (same digest, so the test radiation cache serves it)."""
     f = tmp_path / "small.toml"
-    f.write_text(f'base = "{DEFAULT_CONFIG_PATH}"\n[radiation]\nrays_per_specimen_cell = 400\nrays_per_lamp = 8000\n'
-                 "rays_per_wall = 4000\n[oscillation]\npositions = 5\n"
-                 # the truth's own table as small_config() has it (twin.config.small_config)
-                 "[truth.radiation]\nrays_per_specimen_cell = 800\nrays_per_lamp = 16000\nrays_per_wall = 8000\n"
-                 # and the paper's controller, as small_config() has it
-                 '[control]\nfeedback = "lqg"\nplan_heat_capacity = "constant"\nfeedforward_limit = 1.0\n')
+    f.write_text(small_config_toml())
     from twin.config import load_config
 
     assert load_config(f).digest() == small_config().digest()
