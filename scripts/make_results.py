@@ -3,6 +3,8 @@
     python scripts/make_results.py              # docs/results/<name>.md for every docs/data/<name>.json
     python scripts/make_results.py --check      # exit 1 if a page differs from what its JSON gives
     python scripts/make_results.py --run small  # re-run the reduced campaign into docs/data/campaign-small.json
+    python scripts/make_results.py --store default DIR "furnace-twin campaign --out DIR"
+                                                # DIR/campaign.json -> docs/data/campaign-default.json
 
 A data file holds the campaign's own ``campaign.json`` object (``furnace-twin campaign``, product.md) under
 ``"campaign"``, with how it was made: ``{"title", "command", "furnace", "t_E", "campaign"}``.  The page is that
@@ -11,14 +13,17 @@ seeds beside the paper's bounds, the range over the seeds, the model against the
 say what the stored run said.  ``tests/test_results_pages.py`` checks every page against its JSON.
 
 A campaign on the default furnace (``furnace-twin campaign --out DIR``, about 35 min on 2 cores) is stored the
-same way: copy ``DIR/campaign.json`` under ``"campaign"`` into ``docs/data/campaign-default.json`` with its
-command and ``t_E``, then run this script.
+same way (``--store default DIR COMMAND``).  The README's headline table is made here too, from
+``docs/data/campaign-default.json``: the range over the seeds of each metric, fixed and oscillating, beside the
+paper's bounds; it sits between the README's ``<!-- results:campaign-default -->`` markers, and
+``tests/test_readme.py`` checks it against the JSON's seeds.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -28,8 +33,24 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "docs" / "data"
 PAGES = ROOT / "docs" / "results"
 
+README = ROOT / "README.md"
+
 #: the reduced campaign of tests/experiments/test_campaign.py: small furnace, t_E = 30 s, 2 seeds, honest truth
 SMALL = {"t_E": 30.0, "seeds": 2}
+
+#: the README's headline rows: its words -> the campaign's metric (the true field's rows: what a user's specimen
+#: got, which only a simulation can see; the others: what the twin showed)
+README_ROWS = {
+    "true mean error, transient": "true_mean_error_transient_max",
+    "mean error (estimated), transient": "mean_error_transient_max",
+    "true mean error, steady": "true_mean_error_steady_max",
+    "mean error (estimated), steady": "mean_error_steady_max",
+    "TC4 error, transient": "tc4_error_transient_max",
+    "TC4 error, steady": "tc4_error_steady_max",
+    "true inhomogeneity, steady": "true_inhomogeneity_steady",
+    "inhomogeneity (estimated), steady": "inhomogeneity_steady",
+}
+README_BEGIN, README_END = "<!-- results:campaign-default -->", "<!-- /results:campaign-default -->"
 
 
 def render(doc: dict[str, Any]) -> str:
@@ -70,13 +91,67 @@ def run_small() -> None:
     (DATA / "campaign-small.json").write_text(json.dumps(doc, indent=1) + "\n")
 
 
+def seed_range(experiments: list[dict[str, Any]], key: str, oscillating: bool) -> tuple[float, float]:
+    """Lowest and highest of a metric over the seeds of every experiment of one specimen mode (so over the TC4
+    places too), in % of the setpoint."""
+    values = [100 * float(s["metrics"][key]) for e in experiments if bool(e["oscillation"]) == oscillating
+              for s in e["seeds"]]
+    return min(values), max(values)
+
+
+def readme_table(doc: dict[str, Any]) -> str:
+    """The README's headline table from a stored campaign: each row's range over the seeds, fixed and
+    oscillating, beside the paper's bound (in parentheses where the paper bounds the estimated quantity); ✗ where
+    the worst seed is above it."""
+    from twin.experiments.campaign import TRUE_BOUND_OF, bound
+
+    lines = ["| metric | paper fixed | paper osc. | twin fixed | twin oscillating |", "|---|---|---|---|---|"]
+    for words, key in README_ROWS.items():
+        cells = []
+        for mode in ("fixed", "oscillating"):
+            limit = bound(key, mode)
+            cells.append("-" if limit is None else
+                         f"({100 * limit:.2f} %)" if key in TRUE_BOUND_OF else f"{100 * limit:.2f} %")
+        for oscillating, mode in ((False, "fixed"), (True, "oscillating")):
+            lo, hi = seed_range(doc["campaign"]["experiments"], key, oscillating)
+            limit = bound(key, mode)
+            cells.append(f"{lo:.2f} - {hi:.2f} %" + (" ✗" if limit is not None and hi > 100 * limit else ""))
+        lines.append(f"| {words} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def readme_with_table(readme: str) -> str:
+    """The README with its headline table made again from ``docs/data/campaign-default.json``."""
+    head, rest = readme.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    table = readme_table(load(DATA / "campaign-default.json"))
+    return f"{head}{README_BEGIN}\n{table}\n{README_END}{tail}"
+
+
+def store(name: str, out: Path, command: str) -> None:
+    """``out/campaign.json`` (a ``furnace-twin campaign`` folder) as ``docs/data/campaign-<name>.json``."""
+    result = json.loads((out / "campaign.json").read_text())
+    for e in result["experiments"]:  # the run folders were on the machine that ran it
+        for s in e["seeds"]:
+            s.pop("out", None)
+    # the campaign's own report says its t_E ("seeds 0..4; t_E = 120 s."); campaign.json does not
+    t_E = float(re.search(r"t_E = ([\d.]+) s", (out / "campaign.md").read_text()).group(1))
+    doc = {"title": f"Campaign on the `{name}` furnace", "furnace": name, "t_E": t_E, "command": command,
+           "campaign": result}
+    (DATA / f"campaign-{name}.json").write_text(json.dumps(doc, indent=1) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="compare the pages with their JSON, write nothing")
     ap.add_argument("--run", choices=["small"], help="re-run a campaign into docs/data first")
+    ap.add_argument("--store", nargs=3, metavar=("NAME", "DIR", "COMMAND"),
+                    help="store DIR/campaign.json as docs/data/campaign-NAME.json, made by COMMAND")
     args = ap.parse_args(argv)
     if args.run == "small":
         run_small()
+    if args.store:
+        store(args.store[0], Path(args.store[1]), args.store[2])
     stale = []
     for path, text in pages().items():
         if args.check:
@@ -85,6 +160,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(text)
+    if (DATA / "campaign-default.json").is_file():
+        text = readme_with_table(README.read_text())
+        if not args.check:
+            README.write_text(text)
+        elif README.read_text() != text:
+            stale.append(README)
     for path in stale:
         print(f"{path} differs from its JSON: python scripts/make_results.py", file=sys.stderr)
     return 1 if stale else 0

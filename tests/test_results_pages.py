@@ -36,6 +36,12 @@ def test_every_results_page_is_what_its_json_gives(make_results) -> None:
     assert stored == {p.name for p in pages}, "a results page without its JSON"
 
 
+def test_the_readme_table_is_what_the_default_campaign_gives(make_results) -> None:
+    readme = (REPO / "README.md").read_text()
+    assert make_results.README_BEGIN in readme and make_results.README_END in readme
+    assert make_results.readme_with_table(readme) == readme, "README table stale: python scripts/make_results.py"
+
+
 def test_a_page_shows_each_experiments_worst_seed(make_results) -> None:
     # independent of the report's code: the worst over the seeds, from the seeds' own metrics in the JSON
     data = json.loads((REPO / "docs" / "data" / "campaign-small.json").read_text())
