@@ -117,7 +117,7 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     if story:
         head.text(0, 0.74, "\n".join(story), fontsize=8.5, va="top", weight="bold")
     started = [("as started: " if story and k == 0 else "") + x for k, x in enumerate(_scenario_lines(ts, w))]
-    head.text(0, 0.74 - 0.15 * len(story) if story else 0.62, "\n".join(started), fontsize=8.5, va="top",
+    head.text(0, 0.74 - 0.2 * len(story) if story else 0.62, "\n".join(started), fontsize=8.5, va="top",
               family="monospace")
 
     ax = fig.add_subplot(grid[1, 0])
