@@ -108,8 +108,10 @@ export function verdict(runs, names) {
     const est = ea === null || eb === null ? "" : `the estimate (what a real furnace would show) says ${p(eb)} against ${p(ea)}`
       + ` (${signed(100 * (eb - ea), 2)} pts)`;
     if (ta === null || tb === null) {
-      return `<div>${head}: steady T<sub>sup</sub> — no true field for these runs (a real furnace), so only ${est || "no estimate"};`
-        + " its TC4 error is the only check of it.</div>";
+      const real = [a, b].some((r) => r.scenario.plant && r.scenario.plant.kind === "opcua");
+      const why = real ? "a furnace over OPC UA has no true field" : "their metrics have no true T<sub>sup</sub>";
+      return `<div>${head}: steady T<sub>sup</sub> — ${why}; ${est ? `${est}, and its TC4 error is the only check of it`
+        : "nor an estimated one"}.</div>`;
     }
     const d = tb - ta;
     const word = Math.abs(d) < 1e-4 ? "the same as" : d < 0 ? "lower (better) than" : "higher (worse) than";

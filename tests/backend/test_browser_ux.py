@@ -90,6 +90,18 @@ def _msg(page, id_: str) -> str:
 def test_forms_take_a_decimal_comma_and_a_changed_run_reads_as_what_happened(server, browser, artifacts) -> None:
     page, errors = _open(browser, server.url)
     page.evaluate(WATCH_START)
+    # the faults form reads numbers the same way: a thousands separator refused in words, a decimal comma taken
+    page.select_option("#fault-target", "TC2")
+    page.select_option("#fault-kind", "offset")
+    page.fill("#fault-value", "2,5")
+    page.fill("#fault-at", "1.234,5")
+    page.click("#fault-add")
+    page.wait_for_function("document.getElementById('fault-msg').classList.contains('err')", timeout=5_000)
+    assert "In (s from now)" in _msg(page, "fault-msg") and "not a number" in _msg(page, "fault-msg")
+    page.fill("#fault-at", "1,5")
+    page.click("#fault-add")
+    page.wait_for_function("document.getElementById('fault-pending').textContent.includes('in 1.5 s')", timeout=5_000)
+    assert "2.5" in page.inner_text("#fault-pending") and _msg(page, "fault-msg") == ""
     _fill_start(page, 800.0, 20.0, 600.0, "2", osc=False)  # long enough for a loaded machine; stopped below
     # a thousands separator is refused plainly (not read as 1234.5 m nor as 1.2345 m)
     page.fill("input[name=amplitude]", "1.234,5")
