@@ -177,7 +177,7 @@ def test_forms_take_a_decimal_comma_and_a_changed_run_reads_as_what_happened(ser
     page.fill("input.label-edit", "osc after the change")
     page.press("input.label-edit", "Enter")
     page.wait_for_function(f"document.querySelector(\"#history tr[data-id='{run_id}'] button.name\")"
-                           ".textContent === 'osc after the change'", timeout=15_000)
+                           "?.textContent === 'osc after the change'", timeout=15_000)  # the row is redrawn
 
     # the report's header and file name
     rep = httpx.get(f"{server.url}/api/runs/{run_id}/report.png", timeout=180)
