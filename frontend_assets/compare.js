@@ -1,9 +1,12 @@
 // Run comparison: the ticked runs (live or finished) on one time axis (fillet mean with its reference,
-// T_sup, TC4 error) and their metrics side by side.  Finished runs are read once, live ones every few seconds.
+// T_sup, TC4 error) with the metric windows shaded, their metrics side by side with the difference to the first,
+// and a reading of the question a comparison asks ("did oscillation help?") from the true field and the estimate.
+// Finished runs are read once, live ones every few seconds.
 import { api } from "./api.js";
 import { baseLayout, CONFIG } from "./charts.js";
-import { compareTable } from "./metrics.js";
-import { $, going, runName } from "./page.js";
+import { compareTable, verdict } from "./metrics.js";
+import { windowShapes } from "./overlays.js";
+import { $, going, runLabel } from "./page.js";
 import { state } from "./state.js";
 
 const COLORS = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"];
@@ -35,6 +38,24 @@ function traces(entries, names) {
   return { mean, sup, tc4 };
 }
 
+// The runs by their labels (automatic ones say what happened); the short id only where two labels are the same.
+function uniqueNames(runs) {
+  const labels = runs.map(runLabel);
+  return labels.map((l, i) => (labels.indexOf(l) !== labels.lastIndexOf(l) ? `${l} (${runs[i].id.slice(0, 6)})` : l));
+}
+
+// The transient and steady windows, shaded when the runs share them (same reference, no live change moved
+// them); else the first run's, and the note says so.
+function sharedWindows(entries) {
+  const ws = entries.map((e) => e.detail.windows).filter(Boolean);
+  if (!ws.length) return { shapes: [], annotations: [], note: "" };
+  const tEnd = Math.max(...entries.map((e) => (e.series && e.series.t && e.series.t.length ? e.series.t[e.series.t.length - 1] : 0)));
+  const key = (w) => JSON.stringify([w.transient, w.steady]);
+  const same = ws.every((w) => key(w) === key(ws[0]));
+  return { ...windowShapes(ws[0], tEnd), note: same ? "shaded: the transient and steady windows the metrics are taken over"
+    : "the runs' windows differ (their references do): shaded are the first run's" };
+}
+
 let busy = false;
 
 export async function refreshComparison() {
@@ -47,11 +68,15 @@ export async function refreshComparison() {
   try {
     const entries = (await Promise.all(ids.map((id) => load(id).catch(() => null)))).filter(Boolean);
     // names from the runs list (a label edited since is shown at once), the rest from each run's detail
-    const names = entries.map((e) => runName(state.runs.find((r) => r.id === e.detail.id) || e.detail));
+    const names = uniqueNames(entries.map((e) => state.runs.find((r) => r.id === e.detail.id) || e.detail));
     const tr = traces(entries, names);
-    window.Plotly.react("cmp-mean", tr.mean, baseLayout("T (K)"), CONFIG);
-    window.Plotly.react("cmp-sup", tr.sup, baseLayout("T_sup (K)"), CONFIG);
-    window.Plotly.react("cmp-tc4", tr.tc4, baseLayout("TC4 − estimate (K)"), CONFIG);
+    const w = sharedWindows(entries);
+    const layout = (y) => baseLayout(y, { shapes: w.shapes, annotations: w.annotations });
+    window.Plotly.react("cmp-mean", tr.mean, layout("T (K)"), CONFIG);
+    window.Plotly.react("cmp-sup", tr.sup, layout("T_sup (K)"), CONFIG);
+    window.Plotly.react("cmp-tc4", tr.tc4, layout("TC4 − estimate (K)"), CONFIG);
+    $("cmp-windows").textContent = w.note;
+    $("cmp-verdict").innerHTML = verdict(entries.map((e) => e.detail), names);
     $("cmp-table").innerHTML = compareTable(entries.map((e) => e.detail), names);
   } finally { busy = false; }
 }

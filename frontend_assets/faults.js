@@ -1,7 +1,8 @@
 // Faults of the picked run's simulated furnace: build a list, inject it (PUT /api/runs/{id}/faults replaces
 // the faults in force, times from now), clear it; and what the twin detected (GET /api/runs/{id}: fault_events).
 import { api } from "./api.js";
-import { $, fmt, going } from "./page.js";
+import { parseDecimal, readNumber } from "./inputs.js";
+import { $, fmt, going, showMsg } from "./page.js";
 import { state } from "./state.js";
 
 const UNIT = { drift: "K/s", offset: "K", derate: "fraction kept" };
@@ -39,7 +40,8 @@ function showValue() {
   if (r) {
     input.min = String(r.min); input.max = String(r.max);
     input.title = `${r.min}\u2026${r.max} ${UNIT[kind]}`;
-    if (input.value === "" || Number(input.value) < r.min || Number(input.value) > r.max) {
+    const v = parseDecimal(input.value);
+    if (v === null || v < r.min || v > r.max) {
       input.value = String({ drift: 0.5, offset: 10, derate: 0.5 }[kind]);
     }
   }
@@ -58,10 +60,15 @@ function updateButtons() {
   $("fault-clear").disabled = !live;
 }
 
+// the numbers as the other forms read them: a decimal comma taken, anything unclear refused in words
 function addFault() {
   const kind = $("fault-kind").value;
-  const f = { at: Math.max(0, Number($("fault-at").value) || 0), target: $("fault-target").value, kind };
-  if (limits()[kind]) f.value = Number($("fault-value").value);
+  let f;
+  try {
+    f = { at: readNumber($("fault-at")), target: $("fault-target").value, kind };
+    if (limits()[kind]) f.value = readNumber($("fault-value"));
+  } catch (e) { showMsg(e.message, true, "fault-msg"); return; }
+  if ($("fault-msg").classList.contains("err")) showMsg("", false, "fault-msg");
   pending.push(f);
   renderPending();
 }

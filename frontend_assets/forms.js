@@ -2,6 +2,7 @@
 import { api, setToken } from "./api.js";
 import { estimatorFromForm, showEstimatorSummary } from "./estimatorform.js";
 import { checkSoon, showFeasibility } from "./feasibility.js";
+import { followChange, followStart } from "./followup.js";
 import { restoreForm, saveForm } from "./formstore.js";
 import { readNumber, readSpeed, setLiveOscillation } from "./inputs.js";
 import { $, describeReference, fmt, going, showMsg } from "./page.js";
@@ -71,16 +72,18 @@ async function startRun(ev) {
   try {
     scenario = scenarioFromForm(ev.target);
     const body = JSON.stringify(scenario);
-    showMsg("starting…", false, "start-msg");
+    showMsg("sending the run…", false, "start-msg");
     const created = await api("POST", "/api/runs", scenario, { "Idempotency-Key": requestId(body) });
     if (lastStart) lastStart.at = Date.now();
-    const again = created.replayed ? " (already started: the same request came twice)" : "";
+    const again = created.replayed ? " (already sent: the same request came twice)" : "";
     const warn = created.warnings && created.warnings.length ? ` · warning: ${created.warnings[0]}` : "";
-    // every run is queued for a moment; it waits only while the radiation model loads
-    const waits = created.status === "queued" && state.health && state.health.radiation !== "ready";
-    const how = waits ? "queued (it starts when the radiation model is ready)" : "started";
-    showMsg(`run ${created.id} ${how}${again}: reference ${describeReference(scenario.reference)}${warn}`,
-      warn ? "warn" : false, "start-msg");
+    // a run is queued until it starts (for long only while the radiation model loads): the message says so, and
+    // says "starting" / "running" when the run does (followup.js), never "started" before it has
+    const loading = state.health && state.health.radiation !== "ready" ? " (it starts when the radiation model is ready)" : "";
+    const how = created.status === "queued" ? `queued${loading}` : created.status;
+    const rest = `${again}: reference ${describeReference(scenario.reference)}${warn}`;
+    showMsg(`run ${created.id} ${how}${rest}`, warn ? "warn" : false, "start-msg");
+    followStart(created.id, rest, warn ? "warn" : false);
     btn.disabled = false; // the reply is in: a click from now on is a new request (or the same, if repeated)
     if (state.runId !== created.id) selectRun(created.id);
     refreshRuns();
@@ -109,6 +112,7 @@ async function changeReference() {
     const warn = r.warnings && r.warnings.length ? ` · warning: ${r.warnings[0]}` : "";
     showMsg(r.status === "pending" ? `${what}: still re-planning; it applies when ready${warn}` : `${what}: ${r.status}${at}${warn}`,
       warn ? "warn" : false);
+    if (r.status === "pending") followChange(state.runId, "reference", what);
     refreshRun();
   } catch (e) {
     if (body.points && e.status === 422) area.classList.add("invalid");
@@ -127,7 +131,11 @@ async function toggleOscillation() {
   showMsg("switching oscillation…");
   try {
     const r = await api("PUT", `/api/runs/${state.runId}/oscillation`, body);
-    showMsg(`oscillation ${r.body.enabled ? "on" : "off"}: ${r.status}${r.applied_t !== null && r.applied_t !== undefined ? ` at t = ${fmt(r.applied_t)} s` : ""}`);
+    const what = `oscillation ${r.body.enabled ? "on" : "off"}`;
+    if (r.status === "pending") {
+      showMsg(`${what}: still re-planning; it applies when ready`);
+      followChange(state.runId, "oscillation", what);
+    } else showMsg(`${what}: ${r.status}${r.applied_t !== null && r.applied_t !== undefined ? ` at t = ${fmt(r.applied_t)} s` : ""}`);
     if (r.status === "applied" && state.run) { state.run.oscillation = r.body; setLiveOscillation(r.body); }
     refreshRun();
   } catch (e) { showMsg(e.message, true); }
@@ -143,14 +151,26 @@ async function stopRun() {
   setTimeout(() => { refreshRun(); refreshRuns(); }, 800);
 }
 
+// A refusal on a message line goes when its cause does: once the inputs read without error the line is
+// cleared; while they do not, it names the problem they have now (not the one they had).
+function recheck(id, read) {
+  if (!$(id).classList.contains("err")) return;
+  try { read(); showMsg("", false, id); } catch (e) { showMsg(e.message, true, id); }
+}
+
 export function wireForms() {
   const form = $("start-form");
   restoreForm(form);
   showEstimatorSummary(form);
   form.addEventListener("submit", startRun);
-  const edited = () => { saveForm(form); showEstimatorSummary(form); checkSoon(() => scenarioFromForm(form)); };
+  const edited = () => {
+    saveForm(form); showEstimatorSummary(form); checkSoon(() => scenarioFromForm(form));
+    recheck("start-msg", () => scenarioFromForm(form));
+  };
   form.addEventListener("input", edited);
   form.addEventListener("change", edited);
+  const live = () => [$("new-setpoint"), $("new-tE"), $("live-amplitude"), $("live-period")].forEach(readNumber);
+  for (const id of ["new-setpoint", "new-tE", "live-amplitude", "live-period"]) $(id).addEventListener("input", () => recheck("ctl-msg", live));
   $("ref-btn").addEventListener("click", changeReference);
   $("osc-btn").addEventListener("click", toggleOscillation);
   $("stop-btn").addEventListener("click", stopRun);

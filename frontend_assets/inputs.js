@@ -51,6 +51,17 @@ export function applyLimits(furnace) {
   $("furnace-name").textContent = `furnace ${furnace.name} · η ≤ ${Number((1000 * furnace.eta_max).toPrecision(3))} mm`;
 }
 
+// A decimal number as people type it: "0.048", "0,048" (a decimal comma, issue 27: the browser's number field
+// read "0,048" as 48), "-1.5e-3"; null for anything else, e.g. "1,234.5" or "1.234,5" (thousands separators are
+// ambiguous: refused, never guessed).
+export function parseDecimal(text) {
+  const t = text.trim();
+  const plain = /^[+-]?(\d+\.?\d*|\.\d+)(e[+-]?\d+)?$/i, comma = /^[+-]?(\d+,\d*|,\d+)(e[+-]?\d+)?$/i;
+  if (plain.test(t)) return Number(t);
+  if (comma.test(t)) return Number(t.replace(",", "."));
+  return null;
+}
+
 // The number in an input, checked against its limits; throws an Error that names the field.
 export function readNumber(el) {
   const what = el.dataset.what || el.name || el.id;
@@ -59,8 +70,8 @@ export function readNumber(el) {
   el.classList.remove("invalid");
   const fail = (msg) => { el.classList.add("invalid"); throw new Error(`${what}: ${msg}`); };
   if (!text) fail("enter a number");
-  const v = Number(text);
-  if (!Number.isFinite(v)) fail(`\u201c${text}\u201d is not a number`);
+  const v = parseDecimal(text);
+  if (v === null) fail(`\u201c${text}\u201d is not a number (use digits with a decimal point or comma, e.g. 0.048)`);
   const lo = el.min === "" ? -Infinity : Number(el.min), hi = el.max === "" ? Infinity : Number(el.max);
   if (el.dataset.open && v <= lo) fail(`must be above ${lo}${unit}, got ${v}${unit}`);
   if (v < lo) fail(`must be at least ${lo}${unit}, got ${v}${unit}`);

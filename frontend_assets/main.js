@@ -34,7 +34,8 @@ export function showView(name) {
 const seconds = (s) => (s >= 90 ? `${Math.round(s / 60)} min` : `${Math.round(s)} s`);
 
 function serverState(h) {
-  let text = `server ok · ${h.active_runs} running`;
+  const queued = h.queued_runs || 0;
+  let text = `server ok · ${h.active_runs - queued} running${queued ? ` · ${queued} queued` : ""}`;
   const p = h.radiation_progress;
   if (h.radiation === "computing") {
     const done = p && p.total ? ` ${p.done}/${p.total} positions` : "";

@@ -63,16 +63,62 @@ function uncertaintyNote(m) {
     + `NIS/reading ${m.nis_mean === null || m.nis_mean === undefined ? "–" : fmt(m.nis_mean, 2)} (1 if consistent)</div>`;
 }
 
-// Several runs side by side: one column per run ("K · %"), one row per metric.
+// Several runs side by side: one column per run ("K · %"), one row per metric, and for each run after the
+// first its difference to the first (K and % points: negative = smaller than the first's).
 export function compareTable(runs, names) {
-  const head = runs.map((r, i) => `<th class="num">${esc(names[i])}</th>`).join("");
+  const diffHead = runs.slice(1).map((r, i) => `<th class="num diff" title="this run's value minus the first's">`
+    + `${esc(names[i + 1])} − ${esc(names[0])}</th>`).join("");
+  const head = runs.map((r, i) => `<th class="num">${esc(names[i])}</th>`).join("") + diffHead;
+  const val = (r, k) => (r.metrics && r.metrics[k] !== null && r.metrics[k] !== undefined ? r.metrics[k] : null);
   const rows = keys().map((k) => {
     const cells = runs.map((r) => {
-      const v = r.metrics ? r.metrics[k] : undefined;
-      return `<td class="num">${v === undefined || v === null ? "–" : `${kelvin(v, scaleOf(r))} · ${percent(v)}`}</td>`;
+      const v = val(r, k);
+      return `<td class="num">${v === null ? "–" : `${kelvin(v, scaleOf(r))} · ${percent(v)}`}</td>`;
     }).join("");
-    return `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>${cells}</tr>`;
+    const a = val(runs[0], k);
+    const diffs = runs.slice(1).map((r) => {
+      const b = val(r, k);
+      if (a === null || b === null) return '<td class="num diff">–</td>';
+      const dK = b * scaleOf(r) - a * scaleOf(runs[0]);
+      return `<td class="num diff">${signed(dK, 1)} K · ${signed(100 * (b - a), 2)} pts</td>`;
+    }).join("");
+    return `<tr><td>${esc(metricName(k))} ${helpMark(k)}</td>${cells}${diffs}</tr>`;
   }).join("");
   const notes = runs.map((r, i) => `${esc(names[i])}: ${r.metrics ? esc(windowNote(r)) : "metrics when it ends"}`).join("<br>");
   return `<table><thead><tr><th>metric</th>${head}</tr></thead><tbody>${rows}</tbody></table><div class="note">${notes}</div>`;
+}
+
+const signed = (v, d) => `${v > 0 ? "+" : v < 0 ? "\u2212" : "\u00b1"}${Math.abs(v).toFixed(d)}`;
+
+// The answer to "did it help?" for each run against the first, in one line each: the steady inhomogeneity
+// (T_sup) by the true field, which judges (it is the furnace itself, here simulated), and by the estimate, which
+// is what the twin of a real furnace would show; the estimate's own error on the fillet says how far a difference
+// in it can be trusted.
+export function verdict(runs, names) {
+  const v = (r, k) => (r.metrics && r.metrics[k] !== null && r.metrics[k] !== undefined ? r.metrics[k] : null);
+  const p = (x) => `${fmt(100 * x, 2)} %`;
+  const a = runs[0];
+  if (runs.length < 2 || !a.metrics) return "";
+  const lines = runs.slice(1).map((b, i) => {
+    const head = `<b>${esc(names[i + 1])}</b> against <b>${esc(names[0])}</b>`;
+    if (!b.metrics) return `<div>${head}: when it ends.</div>`;
+    const [ta, tb] = [v(a, "true_inhomogeneity_steady"), v(b, "true_inhomogeneity_steady")];
+    const [ea, eb] = [v(a, "inhomogeneity_steady"), v(b, "inhomogeneity_steady")];
+    const err = Math.max(v(a, "field_estimation_error_steady_max") || 0, v(b, "field_estimation_error_steady_max") || 0);
+    const est = ea === null || eb === null ? "" : `the estimate (what a real furnace would show) says ${p(eb)} against ${p(ea)}`
+      + ` (${signed(100 * (eb - ea), 2)} pts)`;
+    if (ta === null || tb === null) {
+      const real = [a, b].some((r) => r.scenario.plant && r.scenario.plant.kind === "opcua");
+      const why = real ? "a furnace over OPC UA has no true field" : "their metrics have no true T<sub>sup</sub>";
+      return `<div>${head}: steady T<sub>sup</sub> — ${why}; ${est ? `${est}, and its TC4 error is the only check of it`
+        : "nor an estimated one"}.</div>`;
+    }
+    const d = tb - ta;
+    const word = Math.abs(d) < 1e-4 ? "the same as" : d < 0 ? "lower (better) than" : "higher (worse) than";
+    const trust = err ? `; the estimate is off the true field by up to ${p(err)} on the fillet, so it cannot settle a difference smaller than that` : "";
+    return `<div class="verdict-line">${head}: steady T<sub>sup</sub> by the <b>true field</b> ${p(tb)}, ${word} ${p(ta)}`
+      + ` (${signed(100 * d, 2)} pts) — the true field judges. ${est ? `${est[0].toUpperCase()}${est.slice(1)}${trust}.` : ""}`
+      + ` One seed each: a difference of a few hundredths of a % needs more seeds (Studies).</div>`;
+  });
+  return lines.join("");
 }

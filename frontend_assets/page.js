@@ -51,4 +51,9 @@ export function describeOscillation(osc) {
   return osc.enabled ? `on (${fmt(1000 * osc.amplitude, 0)} mm, ${fmt(osc.period, 1)} s)` : "off";
 }
 
-export const runName = (r) => (r.label ? `${r.label} (${r.id.slice(0, 6)})` : r.id);
+// A run's name: the user's label, else the automatic one from what happened ("fixed", "osc 48 mm / 18 s");
+// runName adds the short id (lists where two runs may share a label), runLabel does not (legends, columns).
+export const runLabel = (r) => r.label || (r.story ? r.story.auto_label : "") || r.id;
+export const runName = (r) => (runLabel(r) !== r.id ? `${runLabel(r)} (${r.id.slice(0, 6)})` : r.id);
+// What happened: the reference and oscillation in force at the end (or now), live changes marked.
+export const runStory = (r) => (r.story ? r.story.text : `${shortReference(r.scenario.reference)} · osc ${describeOscillation(r.scenario.oscillation)}`);

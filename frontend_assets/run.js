@@ -4,9 +4,10 @@ import { api } from "./api.js";
 import { render } from "./charts.js";
 import { describeChoice, setEstimatorForm } from "./estimatorform.js";
 import { addEvents, clearEvents, noteStatus } from "./events.js";
+import { settle } from "./followup.js";
 import { setLiveOscillation } from "./inputs.js";
 import { metricsTable } from "./metrics.js";
-import { $, badge, describeOscillation, describeReference, esc, fmt, going, showMsg } from "./page.js";
+import { $, badge, describeOscillation, describeReference, esc, fmt, going, runLabel, runStory, showMsg } from "./page.js";
 import { markShown, refreshRuns } from "./runlist.js";
 import { emptySeries, seriesFromStored } from "./series.js";
 import { state } from "./state.js";
@@ -60,12 +61,13 @@ function describeFurnace(run) {
 function renderRunInfo(run) {
   const sc = run.scenario;
   const now = going(run) ? "now" : "at the end";
-  $("run-title").textContent = `· ${run.label ? `${run.label} · ` : ""}${run.id}`;
+  $("run-title").textContent = `· ${runLabel(run) !== run.id ? `${runLabel(run)} · ` : ""}${run.id}`;
   $("run-details").innerHTML = `
     <div><span class="badge ${esc(run.status)}">${esc(run.status)}</span>${run.error ? ` <span class="msg err">${esc(run.error)}</span>`
       : (run.status_reason ? ` <span class="msg${run.status === "degraded" ? " err" : ""}">${esc(run.status_reason)}</span>` : "")}
       · started ${new Date((run.started_at || run.created_at) * 1000).toLocaleString()}</div>
-    <div>reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})</div>
+    <div id="run-story">${run.story ? `${esc(runStory(run))} (${now}) · reference ${esc(describeReference(run.reference))}`
+      : `reference ${esc(describeReference(run.reference))} · oscillation ${esc(describeOscillation(run.oscillation))} (${now})`}</div>
     ${sc.estimator ? `<div class="muted">estimator ${esc(describeChoice(sc.estimator))}${sc.estimator.shadow
     ? ` · shadow ${esc(describeChoice(sc.estimator.shadow))}` : ""}</div>` : ""}
     <div class="muted">${sc.duration} s · TC4 at (${sc.tc4.join(", ")}) · ${describeFurnace(run)}
@@ -109,6 +111,7 @@ export async function refreshRun(quiet = false) {
     renderRunInfo(run);
     renderFaults(run);
     if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
+    settle(run);
     if (changed) state.dirty = true; // reference markers, windows
   } catch (e) { /* transient */ }
 }

@@ -1,7 +1,7 @@
 // The list of runs (the "Runs & comparison" view) and the Show menu: label (editable), start time,
 // reference, oscillation, status, steady-state errors, files, delete; a filter; ticks for the comparison.
 import { api } from "./api.js";
-import { $, esc, fmt, going, pct, runName, shortReference, showMsg } from "./page.js";
+import { $, describeOscillation, esc, going, pct, runLabel, runName, runStory, shortReference, showMsg } from "./page.js";
 import { state } from "./state.js";
 
 let tableHtml = null, pickHtml = null;
@@ -10,7 +10,7 @@ let onShow = () => {};
 const overOpcUa = (r) => !!(r.scenario.plant && r.scenario.plant.kind === "opcua");
 
 const matches = (r, words) => {
-  const text = `${r.label || ""} ${r.id} ${r.status} ${shortReference(r.scenario.reference)} `
+  const text = `${runLabel(r)} ${r.id} ${r.status} ${runStory(r)} `
     + `${r.scenario.oscillation.enabled ? "oscillating osc" : "fixed"} ${overOpcUa(r) ? `opc ua ${r.scenario.plant.endpoint}` : "simulated"}`;
   return words.every((w) => text.toLowerCase().includes(w));
 };
@@ -18,15 +18,21 @@ const matches = (r, words) => {
 function row(r) {
   const m = r.metrics || {}, base = `/api/runs/${r.id}`, live = going(r);
   const when = new Date((r.started_at || r.created_at) * 1000);
-  const files = `<a href="${base}/export.csv" download>csv</a><a href="${base}/report.pdf" download>pdf</a>`
-    + `<a href="${base}/timeseries" download>npz</a><a href="${base}/recording" download>rrd</a>`
+  // what happened (the server's story); a run from an older server: as it started
+  const story = r.story || { reference: shortReference(r.scenario.reference), oscillation: describeOscillation(r.scenario.oscillation) };
+  // only the files the run has: an interrupted run may have none (its links answered a raw 404)
+  const f = r.files || {}, series = f.timeseries || (live && r.latest);
+  const files = (series ? `<a href="${base}/export.csv" download>csv</a><a href="${base}/report.pdf" download>pdf</a>` : "")
+    + (f.timeseries ? `<a href="${base}/timeseries" download>npz</a>` : "")
+    + (f.recording ? `<a href="${base}/recording.rrd" download>rrd</a>` : "")
+    + (!series && !f.recording ? `<span class="muted" title="${live ? "files come with the run's first sample" : "the run ended before any sample was saved"}">no files</span>` : "")
     + (r.links && r.links.rerun ? `<a href="${esc(r.links.rerun)}" target="_blank" rel="noopener" title="open in the rerun web viewer">rerun</a>` : "");
   return `<tr data-id="${esc(r.id)}"><td><input type="checkbox" class="cmp" aria-label="compare ${esc(r.id)}"${state.compare.has(r.id) ? " checked" : ""}></td>
-    <td class="label"><button class="name" title="show this run">${esc(r.label || "(no label)")}</button>
+    <td class="label"><button class="name${r.label ? "" : " auto"}" title="${r.label ? "show this run" : "show this run (an automatic label, from what happened: ✎ names it)"}">${esc(runLabel(r))}</button>
       <button class="link edit" title="edit the label">✎</button><br><span class="id">${esc(r.id)}</span></td>
     <td title="${esc(when.toLocaleString())}">${esc(when.toLocaleDateString())} ${esc(when.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" }))}</td>
-    <td>${esc(shortReference(r.scenario.reference))}${overOpcUa(r) ? `<br><span class="id" title="${esc(r.scenario.plant.endpoint)}">OPC UA</span>` : ""}</td>
-    <td>${r.scenario.oscillation.enabled ? `on ${fmt(1000 * r.scenario.oscillation.amplitude, 0)} mm` : "off"}</td>
+    <td class="story">${esc(story.reference)}${overOpcUa(r) ? `<br><span class="id" title="${esc(r.scenario.plant.endpoint)}">OPC UA</span>` : ""}</td>
+    <td class="story">${esc(story.oscillation)}</td>
     <td><span class="badge ${esc(r.status)}">${esc(r.status)}</span></td>
     <td class="num">${pct(m.mean_error_steady_max)} %</td><td class="num">${pct(m.tc4_error_steady_max)} %</td>
     <td class="num">${pct(m.inhomogeneity_steady)} %</td><td>${files}</td>
@@ -41,7 +47,7 @@ function render() {
   const html = shown.map(row).join("");
   if (html !== tableHtml) { document.querySelector("#history tbody").innerHTML = html; tableHtml = html; }
   const opts = [`<option value="">–</option>`, ...state.runs.slice(0, 60).map((r) =>
-    `<option value="${esc(r.id)}">${esc(runName(r))} · ${esc(r.status)} · ${esc(shortReference(r.scenario.reference))}</option>`)].join("");
+    `<option value="${esc(r.id)}">${esc(runName(r))} · ${esc(r.status)} · ${esc(runStory(r))}</option>`)].join("");
   if (opts !== pickHtml) { $("run-pick").innerHTML = opts; pickHtml = opts; }
   markShown();
   $("compare-count").textContent = state.compare.size ? `· ${state.compare.size} ticked` : "";
@@ -63,14 +69,16 @@ export async function refreshRuns() {
 function editLabel(tr) {
   const run = state.runs.find((r) => r.id === tr.dataset.id);
   const cell = tr.querySelector("td.label");
-  cell.innerHTML = `<input class="label-edit" maxlength="80" value="${esc(run ? run.label || "" : "")}" aria-label="label of run ${esc(tr.dataset.id)}">`;
+  cell.innerHTML = `<input class="label-edit" maxlength="80" value="${esc(run ? runLabel(run) : "")}" aria-label="label of run ${esc(tr.dataset.id)}">`;
   const input = cell.querySelector("input");
   input.focus();
   let done = false;
   const finish = async (save) => {
     if (done) return;
     done = true;
-    if (save) {
+    // an automatic label left as it was stays automatic (it follows what happens next)
+    const same = run && !run.label && input.value.trim() === runLabel(run);
+    if (save && !same) {
       try { await api("PATCH", `/api/runs/${tr.dataset.id}`, { label: input.value }); } catch (e) { showMsg(e.message, true, "start-msg"); }
     }
     input.remove();

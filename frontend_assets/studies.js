@@ -2,6 +2,7 @@
 // study's progress, best case per metric, percentiles, failed cases, figures and downloads.
 // Backed by POST /api/studies, GET /api/studies and GET /api/studies/{id}; stop and resume.
 import { api, token } from "./api.js";
+import { helpMark, metricName } from "./glossary.js";
 import { $, pct, showMsg } from "./page.js";
 
 const ACTIVE = ["queued", "running"];
@@ -124,9 +125,11 @@ function renderStudy(s) {
   const active = ACTIVE.includes(s.status);
   const resumable = ["interrupted", "stopped", "error"].includes(s.status);
   const downloads = Object.entries(s.downloads).map(([n, u]) => `<a href="${u}" data-url="${u}" download="${esc(s.id)}-${esc(n)}">${esc(n)}</a>`).join(" · ");
-  const best = (s.best || []).map((b) => `<tr><td>${esc(b.metric)}</td><td class="num">${pct(b.value)} %</td>
+  // metrics by their names in the glossary (the dashboard's words), the code key on hover (issue 27 item 8)
+  const metric = (k) => `<span title="${esc(k)}">${esc(metricName(k))}</span> ${helpMark(k)}`;
+  const best = (s.best || []).map((b) => `<tr><td>${metric(b.metric)}</td><td class="num">${pct(b.value)} %</td>
       <td>${params(b.params)}${b.key ? "" : ` <span class="muted">(median of ${b.n})</span>`}</td></tr>`).join("");
-  const pcts = Object.entries(s.percentiles || {}).map(([m, p]) => `<tr><td>${esc(m)}</td>${["p5", "p50", "p95", "max"]
+  const pcts = Object.entries(s.percentiles || {}).map(([m, p]) => `<tr><td>${metric(m)}</td>${["p5", "p50", "p95", "max"]
     .map((q) => `<td class="num">${pct(p[q])}</td>`).join("")}</tr>`).join("");
   const failed = (s.cases || []).filter((c) => c.status === "failed");
   const figures = s.figures.map((u) => `<a href="${u}" target="_blank" rel="noopener" title="${esc(u.split("/").pop())}"><img ${token() ? "" : `src="${u}"`} data-src="${u}" loading="lazy" alt="${esc(u.split("/").pop())}"></a>`).join("");

@@ -27,7 +27,8 @@ class Health(BaseModel):
     radiation: Literal["ready", "computing", "failed"] = Field(
         description="the radiation model: runs posted while 'computing' wait as 'queued'")
     radiation_progress: RadiationProgress | None = None
-    active_runs: int
+    active_runs: int = Field(description="runs this server drives: queued, starting or running")
+    queued_runs: int = Field(0, description="of those, the runs still waiting (for the radiation model)")
     max_concurrent_runs: int
     viser_url: str | None = Field(None, description="the 3D view, when it runs")
     rerun_url: str | None = Field(None, description="the rerun web viewer served by this server (/rerun/), when it "
@@ -85,6 +86,15 @@ class ChangeResult(BaseModel):
     warnings: list[str] = Field(default_factory=list, description="feasibility of a new reference")
 
 
+class RunStoryOut(BaseModel):
+    """A run by what happened (``backend.runs.story``)."""
+
+    reference: str = Field(description="'1050 K / 30 s (changed at 7.6 s)'")
+    oscillation: str = Field(description="'on from 12.0 s (48 mm / 18 s)', 'off', 'on (48 mm / 18 s)'")
+    auto_label: str = Field(description="a name for a run without a label: 'fixed', 'osc 48 mm / 18 s'")
+    text: str = Field(description="one line: reference · osc oscillation")
+
+
 class RunSummary(BaseModel):
     id: str
     status: str = Field(description="queued, starting, running, degraded (going, but no thermocouple reading has "
@@ -99,6 +109,10 @@ class RunSummary(BaseModel):
     metrics: dict[str, Any] | None = Field(None, description="product.md metrics (calibration, shadow: objects)")
     error: str | None = None
     label: str | None = Field(None, description="the user's name for the run (PATCH /api/runs/{id})")
+    story: RunStoryOut | None = Field(None, description="what happened: the reference and oscillation in force at "
+                                                        "the end (or now), live changes marked, an automatic label")
+    files: dict[str, bool] = Field(default_factory=dict, description="which run files exist (recording, timeseries, "
+                                                                     "metrics): an interrupted run may have none")
     links: RunLinks
 
 
@@ -124,7 +138,6 @@ class RunDetail(RunSummary):
                                                description="faults injected, cleared and detected by the twin: "
                                                            "[{t (s), text}], oldest first")
     changes: list[ChangeOut] = Field(default_factory=list)
-    files: dict[str, bool] = Field(default_factory=dict, description="which run files exist")
     windows: dict[str, Any] | None = Field(None, description="the metric windows: {t0, t_E, setpoint, transient: "
                                                              "[a, b], steady: [a, b]}, from the last reference change")
 

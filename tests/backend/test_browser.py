@@ -81,7 +81,7 @@ def test_dashboard_points_run_with_live_changes(server, browser, artifacts, smal
     page.fill("input[name=duration]", "600")
     page.fill("input[name=speed]", "2")
     page.click("#start-btn")
-    _wait_text(page, "#start-msg", "started: reference points 4 s → 700 K, 8 s → 900 K")
+    _wait_text(page, "#start-msg", ": reference points 4 s → 700 K, 8 s → 900 K")
     run_id = _js(page, "state.runId")
     run = httpx.get(f"{server.url}/api/runs/{run_id}", timeout=10).json()
     assert run["scenario"]["reference"] == {"points": [[4.0, 700.0], [8.0, 900.0]]}
@@ -218,7 +218,7 @@ def test_dashboard_asks_for_the_token(browser, tmp_path, small_cfg, artifacts) -
         _wait_text(page, "#start-msg", "the API token is wrong")
         page.fill("#token", "s3cret-token-0123456")
         page.click("#start-btn")
-        _wait_text(page, "#start-msg", "started")
+        _wait_text(page, "#start-msg", ": reference")
         run_id = _js(page, "state.runId")
         page.wait_for_function("document.getElementById('run-badge').textContent === 'running'", timeout=30_000)
         assert _js(page, "sessionStorage.getItem('furnace-twin-token')") == "s3cret-token-0123456"
@@ -258,7 +258,7 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
         page.check("input[name=osc]")
         page.fill("input[name=speed]", "1")
         page.click("#start-btn")
-        _wait_text(page, "#start-msg", "started")
+        _wait_text(page, "#start-msg", ": reference")
         run_id = _js(page, "state.runId")
         run = httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()
         assert run["oscillation"] == {"enabled": True, "amplitude": 0.03, "period": 18.0}
@@ -391,7 +391,7 @@ def test_comparison_label_and_delete(browser, tmp_path, small_cfg, artifacts) ->
         page.wait_for_selector(f"#history tr[data-id='{ids[1]}']")
         # the list: start time, reference, oscillation, status and errors per run
         row = _text(page, f"#history tr[data-id='{ids[1]}']")
-        assert "900 K / 4 s" in row and "on 48 mm" in row and "finished" in row and "%" in row
+        assert "900 K / 4 s" in row and "on (48 mm" in row and "finished" in row and "%" in row
         for run_id in ids:
             page.check(f"#history tr[data-id='{run_id}'] input.cmp")
         page.wait_for_function("document.getElementById('cmp-mean').data && document.getElementById('cmp-mean')"
@@ -400,7 +400,10 @@ def test_comparison_label_and_delete(browser, tmp_path, small_cfg, artifacts) ->
         assert _js(page, "document.getElementById('cmp-tc4').data.length") == 2
         assert _js(page, "document.getElementById('cmp-mean').data[0].x[0]") == pytest.approx(0.1)  # one time axis
         heads = _js(page, "[...document.querySelectorAll('#cmp-table th')].map((th) => th.textContent)")
-        assert heads == ["metric", ids[0], ids[1]] or heads == ["metric", ids[1], ids[0]]
+        # the runs by their automatic labels (issue 27: not hex ids), then the difference column
+        labels = [httpx.get(f"{srv.url}/api/runs/{i}", timeout=10).json()["story"]["auto_label"] for i in ids]
+        assert labels[0] == "fixed" and labels[1].startswith("osc 48 mm / ")
+        assert heads[0] == "metric" and sorted(heads[1:3]) == sorted(labels) and heads[3] == f"{heads[2]} − {heads[1]}"
         # the table's layout only: the stand-in loop's metrics are in kelvin, not relative like the real loop's;
         # the figures and the overlaid series are checked on the real loop in test_browser_truth.py
         assert "Mean error, transient (max)" in _text(page, "#cmp-table") and " K · " in _text(page, "#cmp-table")
@@ -441,17 +444,17 @@ def test_double_click_on_start_starts_one_run(browser, tmp_path, small_cfg) -> N
         page.evaluate("""() => new Promise((resolve) => {
             const btn = document.getElementById('start-btn'), msg = document.getElementById('start-msg');
             const tick = () => {
-                if (!btn.disabled && msg.textContent.includes('started')) { btn.click(); resolve(); }
+                if (!btn.disabled && msg.textContent.includes(': reference')) { btn.click(); resolve(); }
                 else setTimeout(tick, 5);
             };
             tick();
         })""")
-        _wait_text(page, "#start-msg", "already started")
+        _wait_text(page, "#start-msg", "already sent")
         runs = httpx.get(f"{srv.url}/api/runs", timeout=10).json()
         assert len(runs) == 1, [r["id"] for r in runs]
         page.fill("input[name=seed]", "7")  # a changed form is a new start
         page.click("#start-btn")
-        page.wait_for_function("document.getElementById('start-msg').textContent.includes('started') && "
+        page.wait_for_function("document.getElementById('start-msg').textContent.includes(': reference') && "
                                "!document.getElementById('start-msg').textContent.includes('already')")
         page.wait_for_function(f"state.runId !== '{runs[0]['id']}'", timeout=30_000)
         assert len(httpx.get(f"{srv.url}/api/runs", timeout=10).json()) == 2

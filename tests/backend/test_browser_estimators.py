@@ -46,7 +46,7 @@ def _start(page, estimator: str, shadow: str, duration: str = "60", speed: str =
     page.fill("input[name=duration]", duration)
     page.fill("input[name=speed]", speed)
     page.click("#start-btn")
-    page.wait_for_function("document.getElementById('start-msg').textContent.includes('started')", timeout=120_000)
+    page.wait_for_function("document.getElementById('start-msg').textContent.includes(': reference')", timeout=120_000)
     return page.evaluate("state.runId")
 
 

@@ -59,7 +59,9 @@ def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
     page.wait_for_function("[...document.querySelectorAll('#study-detail .figures img')].every(i => i.complete"
                            " && i.naturalWidth > 0)")
     detail = page.inner_text("#study-detail")
-    assert "4 / 4" in detail and "Best case per metric" in detail and "inhomogeneity_steady" in detail
+    assert "4 / 4" in detail and "Best case per metric" in detail
+    # metrics by their glossary names, not code keys (issue 27 item 8)
+    assert "T_sup, steady (mean)" in detail and "inhomogeneity_steady" not in detail, detail
     links = page.eval_on_selector_all("#study-detail .downloads a", "as => as.map(a => a.textContent)")
     assert set(links) == {"results.parquet", "results.csv", "study.md", "summary.json"}
     csv = httpx.get(server.url + page.get_attribute("#study-detail .downloads a[href$='results.csv']", "href"))

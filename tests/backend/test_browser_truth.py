@@ -146,13 +146,16 @@ def test_the_comparison_overlays_the_runs_series_and_repeats_their_metrics(finis
                            "document.getElementById('cmp-mean').data.length === 4", timeout=60_000)
     mean = page.evaluate("document.getElementById('cmp-mean').data.map((d) => ({name: d.name, x: d.x, y: d.y}))")
     tc4 = page.evaluate("document.getElementById('cmp-tc4').data.map((d) => ({name: d.name, x: d.x, y: d.y}))")
+    # the runs by their automatic labels (issue 27: not hex ids), then the difference column
+    label = {r[0]: httpx.get(f"{srv.url}/api/runs/{r[0]}", timeout=10).json()["story"]["auto_label"] for r in runs}
     heads = page.evaluate("[...document.querySelectorAll('#cmp-table th')].map((th) => th.textContent)")[1:]
-    assert sorted(heads) == sorted(r[0] for r in runs)
+    assert sorted(heads[:len(runs)]) == sorted(label.values()) and heads[len(runs):] == [f"{heads[1]} − {heads[0]}"]
+    heads = heads[:len(runs)]
     rows = _metric_rows(page, "#cmp-table")
     for run_id, saved, z in runs:
-        i = heads.index(run_id)  # the traces come in the table's order, two (mean, reference) per run
+        i = heads.index(label[run_id])  # the traces come in the table's order, two (mean, reference) per run
         est, ref = mean[2 * i], mean[2 * i + 1]
-        assert est["name"] == run_id and ref["name"] == f"{run_id} reference"
+        assert est["name"] == label[run_id] and ref["name"] == f"{label[run_id]} reference"
         # the very samples of the run's timeseries.npz (120 of them: below the page's 1500-point limit)
         np.testing.assert_array_equal(est["x"], z["t"])
         np.testing.assert_array_equal(est["y"], z["T_mean_hat"])

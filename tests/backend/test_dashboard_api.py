@@ -145,7 +145,7 @@ def test_csv_and_report_exports(tmp_path, small_cfg) -> None:
         png = c.get(f"/api/runs/{run_id}/report.png")
         assert c.get(f"/api/runs/{run_id}/report.svg").status_code == 422
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
-    assert f'filename="{run_id}-a-b-test.csv"' in r.headers["content-disposition"]
+    assert f'filename="a-b-test-{run_id}.csv"' in r.headers["content-disposition"]  # by label first
     rows = list(csv.reader(io.StringIO(r.text)))
     head, body = rows[0], rows[1:]
     for col in ("t_s", "eta_m", "T_ref_K", "T_mean_hat_K", "TC4_K", "TC4_hat_K", "u_T1h", "u_ff_T2v", "T_sup_K",

@@ -70,6 +70,8 @@ def test_a_post_during_warm_up_is_queued_and_starts_when_ready(tmp_path, small_c
         assert "loading" in pending.json()["messages"][0]
         time.sleep(0.3)
         assert c.get(f"/api/runs/{run_id}").json()["status"] == "queued"  # nothing can run yet
+        # the header's counts: a queued run is not "1 running" (issue 27 item 9)
+        assert (_health(c)["active_runs"], _health(c)["queued_runs"]) == (1, 1)
 
         # with the lamps off the warm holders and walls keep the specimen above 350 K: the last point cannot be
         # held (test_lifecycle_real.py), which only the model can tell

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import textwrap
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import IO, Any
 
 import numpy as np
@@ -101,18 +101,24 @@ def _metrics_table(ax: Axes, metrics: Mapping[str, Any], w: Windows) -> None:
     ax.set_title(f"metrics (% of {w.setpoint:g} K)", fontsize=9, loc="left")
 
 
-def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str = "") -> Figure:
-    """The report as a matplotlib figure (landscape A4)."""
+def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str = "",
+                  story: Sequence[str] = ()) -> Figure:
+    """The report as a matplotlib figure (landscape A4).  ``story``: header lines above the scenario as started
+    (what happened: the reference and oscillation in force at the end, the date, furnace and version)."""
     t = np.asarray(ts["t"], float)
     t_end = float(t[-1]) if t.size else 0.0
     w = windows_of(ts)
     fig = Figure(figsize=(11.69, 8.27))
-    grid = fig.add_gridspec(4, 3, height_ratios=[0.3, 1, 1, 0.32], hspace=0.6, wspace=0.3,
+    grid = fig.add_gridspec(4, 3, height_ratios=[0.42 if story else 0.3, 1, 1, 0.32], hspace=0.6, wspace=0.3,
                             left=0.06, right=0.98, top=0.95, bottom=0.02)
     head = fig.add_subplot(grid[0, :])
     head.axis("off")
     head.text(0, 1.0, title or "furnace-twin run", fontsize=13, weight="bold", va="top")
-    head.text(0, 0.62, "\n".join(_scenario_lines(ts, w)), fontsize=8.5, va="top", family="monospace")
+    if story:
+        head.text(0, 0.74, "\n".join(story), fontsize=8.5, va="top", weight="bold")
+    started = [("as started: " if story and k == 0 else "") + x for k, x in enumerate(_scenario_lines(ts, w))]
+    head.text(0, 0.74 - 0.2 * len(story) if story else 0.62, "\n".join(started), fontsize=8.5, va="top",
+              family="monospace")
 
     ax = fig.add_subplot(grid[1, 0])
     _windows(ax, w, t_end)
@@ -210,8 +216,8 @@ def report_events(events: list[Any]) -> list[Any]:
 
 
 def write_report(ts: Mapping[str, Any], metrics: Mapping[str, Any], out: IO[bytes], *, fmt: str = "pdf",
-                 title: str = "") -> None:
+                 title: str = "", story: Sequence[str] = ()) -> None:
     """Write the one-page report to ``out`` as ``pdf`` or ``png``."""
     if fmt not in ("pdf", "png"):
         raise ValueError(f"report format must be pdf or png, got {fmt!r}")
-    report_figure(ts, metrics, title).savefig(out, format=fmt, dpi=110)
+    report_figure(ts, metrics, title, story).savefig(out, format=fmt, dpi=110)

@@ -6,7 +6,9 @@ from __future__ import annotations
 import csv
 import io
 import re
+import time
 from collections.abc import Iterator, Mapping
+from importlib import metadata
 from typing import Any, Literal
 
 import numpy as np
@@ -15,6 +17,8 @@ from fastapi.responses import Response, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import ManagerDep
+from backend.runs.story import RunStory, describe
+from backend.storage.repository import ACTIVE_STATUSES
 from backend.streaming.series import NoSeries, fillet_series, run_arrays
 from twin.experiments.report import write_report
 from twin.runs.metrics import compute_metrics
@@ -66,10 +70,22 @@ def _csv_rows(names: list[str], table: np.ndarray) -> Iterator[str]:
     yield buf.getvalue()
 
 
+def _story(manager: ManagerDep, run_id: str) -> RunStory:
+    return describe(manager.run(run_id).scenario, manager.changes(run_id))
+
+
 def _filename(manager: ManagerDep, run_id: str, suffix: str) -> str:
-    label = manager.run(run_id).label or ""
+    """ "osc-48-mm-18-s-<id>.pdf": the run's label (else its automatic one) first, then its id."""
+    label = manager.run(run_id).label or _story(manager, run_id).auto_label
     safe = re.sub(r"[^A-Za-z0-9._-]+", "-", label).strip("-")[:40]
-    return f"{run_id}{'-' + safe if safe else ''}{suffix}"
+    return f"{safe + '-' if safe else ''}{run_id}{suffix}"
+
+
+def _version() -> str:
+    try:
+        return metadata.version("furnace-twin")
+    except metadata.PackageNotFoundError:
+        return "unknown"
 
 
 @router.get("/{run_id}/export.csv", response_class=StreamingResponse, responses=NOT_FOUND)
@@ -93,9 +109,13 @@ async def report(run_id: str, fmt: Literal["pdf", "png"], manager: ManagerDep) -
     def render() -> bytes:
         metrics = row.metrics if row.metrics is not None else compute_metrics(z)
         state = manager.status(run_id) or row.status
-        title = f"run {run_id}" + (f" · {row.label}" if row.label else "") + f" · {state}"
+        story = _story(manager, run_id)
+        title = f"{row.label or story.auto_label} · run {run_id} · {state}"
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(row.started_at or row.created_at))
+        what = (f"{'in force now' if state in ACTIVE_STATUSES else 'in force at the end'}: {story.text}",
+                f"started {when} · furnace {manager.limits.furnace} · furnace-twin {_version()}")
         out = io.BytesIO()
-        write_report(z, metrics, out, fmt=fmt, title=title)
+        write_report(z, metrics, out, fmt=fmt, title=title, story=what)
         return out.getvalue()
 
     body = await run_in_threadpool(render)  # matplotlib: off the event loop

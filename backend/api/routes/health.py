@@ -39,11 +39,13 @@ def _progress(w: Any) -> RadiationProgress | None:
 def health(manager: ManagerDep, settings: SettingsDep, request: Request) -> Health:
     w = manager.warm_up()
     progress = _progress(w)
+    live = manager.live_runs()
     return Health(
         status="ok",
         radiation="ready" if w is None else w.state,
         radiation_progress=progress,
-        active_runs=len(manager.live_runs()),
+        active_runs=len(live),
+        queued_runs=sum(manager.status(r) == "queued" for r in live),
         max_concurrent_runs=settings.max_concurrent_runs,
         viser_url=getattr(request.app.state, "viser_url", None),
         # the viewer as this server serves it, offline (backend/api/routes/rerun_page.py)

@@ -14,10 +14,12 @@ from backend.api.schemas import (
     RunCreated,
     RunDetail,
     RunLinks,
+    RunStoryOut,
     RunSummary,
     StopResult,
 )
 from backend.runs.manager import RunManager
+from backend.runs.story import describe
 from backend.storage.repository import ACTIVE_STATUSES, DEGRADED, RunRow
 from twin.runs.metrics import windows_from
 
@@ -63,6 +65,7 @@ def live_reason(manager: RunManager, run_id: str, state: str) -> str | None:
 
 def summary(row: RunRow, manager: RunManager, *, whole: bool = True, request: Request | None = None) -> RunSummary:
     state = manager.status(row.id) or row.status
+    files = manager.files(row.id)
     return RunSummary(
         id=row.id,
         status=state,
@@ -75,6 +78,9 @@ def summary(row: RunRow, manager: RunManager, *, whole: bool = True, request: Re
         metrics=row.metrics,
         error=row.error,
         label=row.label,
+        story=RunStoryOut(**describe(row.scenario, manager.changes(row.id)).to_json()),
+        files={"recording": files.recording.is_file(), "timeseries": files.timeseries.is_file(),
+               "metrics": files.metrics.is_file()},
         links=links(row.id, rerun_link(request, manager, row.id, state)),
     )
 
@@ -113,7 +119,6 @@ def get_run(run_id: str, manager: ManagerDep, request: Request) -> RunDetail:
     """One run: status, scenario, the reference and oscillation in force, latest values, metrics,
     the changes made while it ran."""
     row = manager.run(run_id)
-    files = manager.files(row.id)
     now = manager.in_force(row.id)
     changes = manager.changes(row.id)
     ref = row.scenario.get("reference") or {}
@@ -128,8 +133,6 @@ def get_run(run_id: str, manager: ManagerDep, request: Request) -> RunDetail:
         faults=now.faults,
         fault_events=manager.fault_events(row.id),
         changes=[ChangeOut(**c.__dict__) for c in changes],
-        files={"recording": files.recording.is_file(), "timeseries": files.timeseries.is_file(),
-               "metrics": files.metrics.is_file()},
         windows=None if windows is None else windows.to_json(),
     )
 
