@@ -12,6 +12,7 @@
 | closed_loop_rtf_lqg, step_ms_lqg | the same with the paper's LQG feedback (default estimator) |
 | mpc_step_ms_p50, mpc_step_ms_p99 | the MPC's time per sample (condensing + QP), when the feedback is the MPC |
 | closed_loop_rtf_mpc_over_lqg | closed_loop_rtf / closed_loop_rtf_lqg (issue 26: at least 0.5) |
+| run_wall_s | one default (240 s) ``furnace-twin run``, tables cached, as a subprocess: wall s, median of 3 |
 | ocp_s | feedforward OCP solve for a whole run |
 | replan_s | re-plan after a reference change, warm-started |
 | stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
@@ -27,7 +28,10 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -109,7 +113,30 @@ def plant_rtf(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> fl
     return duration / wall
 
 
-def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True) -> dict[str, float]:
+def run_wall_seconds(config: str | None = None, repeats: int = 3, duration: float | None = None) -> float:
+    """Median wall time (s) of ``repeats`` ``furnace-twin run`` commands of the furnace ``config`` (the default
+    scenario: 240 s; or one of ``duration`` s), each a fresh process as a user starts it: imports, model, plan,
+    loop, files, figures.  The tables must be cached (:func:`run_bench` loads both first); a failed run raises."""
+    walls = []
+    with tempfile.TemporaryDirectory(prefix="furnace-twin-bench-run-") as d:
+        scenario: list[str] = []
+        if duration is not None:
+            scenario = ["--scenario", os.path.join(d, "scenario.json")]
+            with open(scenario[1], "w") as f:
+                json.dump({"duration": duration}, f)
+        for i in range(repeats):
+            cmd = [sys.executable, "-m", "furnace_twin.cli", *(["--config", config] if config else []), "run",
+                   *scenario, "--out", os.path.join(d, f"run-{i}"), "--json"]
+            t0 = time.perf_counter()
+            done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            walls.append(time.perf_counter() - t0)
+            if done.returncode != 0:
+                raise RuntimeError(f"{' '.join(cmd)} failed ({done.returncode}): {done.stderr[-2000:]}")
+    log.info("run_wall_s: %s", ", ".join(f"{w:.2f}" for w in walls))
+    return float(np.median(walls))
+
+
+def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True, config: str | None = None) -> dict[str, float]:
     from twin.control.feedforward import ocp_seconds
     from twin.control.replan import replan_seconds
     from twin.furnace.simulated.truth import truth_radiation_config
@@ -129,6 +156,11 @@ def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True) -> dict[str, f
     out["replan_s"] = replan_seconds(cfg, rad)
     log.info("bench: closed loop")
     out.update(closed_loop_figures(cfg, rad))
+    log.info("bench: furnace-twin run, wall time")
+    from twin.furnace.simulated.truth import truth_radiation
+
+    truth_radiation(cfg)  # the simulated furnace's table, cached (the run's other table is rad's)
+    out["run_wall_s"] = run_wall_seconds(config)
     if include_stream:
         from benchmarks.stream import stream_bench
 
@@ -144,7 +176,7 @@ def bench_command(cfg: FurnaceConfig, args: Any) -> int:
 
         figures = hil_figures(cfg, getattr(args, "config", None), args.duration)
     else:
-        figures = run_bench(cfg)
+        figures = run_bench(cfg, config=getattr(args, "config", None))
     if args.json:
         print(json.dumps(figures))  # noqa: T201
     else:

@@ -224,3 +224,27 @@ def test_mpc_runs_the_furnace_loop(small_radiation):
     assert isinstance(loop.controller, MPCController) and loop.controller.fallbacks == 0
     u = np.array([s.u for s in snaps])
     assert np.all((u >= 0.0) & (u <= 1.0)) and len(loop.controller.step_ms) == len(snaps)
+
+
+def test_the_plans_deltas_made_once_give_the_same_qp(standin, cfg):
+    """condensed_qp with the plan's deltas of Remark 5 made once (the controller's way, issue 21) builds the QP
+    it builds from the horizon's own feedforward, to the bit: on a plan whose total power crosses delta0 inside
+    the horizon, at its end (the last input held) and past it; and the deltas are those of anti_windup_delta."""
+    from twin.control.mpc import anti_windup_deltas
+
+    w = cfg.lqg
+    total = np.linspace(0.5, 1.5, 120) * w.delta0  # 1^T u_ff crosses delta0 at sample 60
+    plan = _plan(standin, (total / standin.m)[:, None] * np.ones(standin.m))
+    gains = lqg_gains(standin, plan, cfg, jacobian_every=EVERY)
+    deltas = anti_windup_deltas(plan.u_ff, w.delta0)
+    assert deltas.tolist() == [anti_windup_delta(u, w.delta0) for u in plan.u_ff] and 0 < deltas.sum() < len(deltas)
+    settings = MPCSettings(horizon=12, moves=4, rate=0.05)
+    u_prev = plan.u_ff[0] + 0.01
+    for j in (0, 52, 58, 111, 119, 125):
+        e0 = _e0(standin, 0.4, e_I=0.3, seed=j)
+        for with_rates in (True, False):
+            a = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, u_prev, settings, with_rates)
+            b = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, u_prev, settings, with_rates,
+                             plan_deltas=deltas)
+            for name in ("H", "g", "A", "lba", "uba", "lbx", "ubx"):
+                assert getattr(a.qp, name).tobytes() == getattr(b.qp, name).tobytes(), (j, name)

@@ -172,3 +172,31 @@ def test_ray_tracing_workers_die_with_a_killed_parent(tmp_path):
     assert locks
     with open(locks[0], "w") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises BlockingIOError while an orphan holds it
+
+
+def test_matrices_for_another_emissivity_are_built_once_and_equal_a_build(tiny, tmp_path, monkeypatch, caplog):
+    """with_specimen_emissivity of a cached table (the plant's mismatch, the model's emissivity sensitivity):
+    the first call builds P1, P2 (eq. 5) and keeps them beside the table, later ones (another process: a new
+    model) read them back equal to the bit to what a build gives; a different eps is its own file; an
+    unreadable file is rebuilt (issue 21: a run built them three times)."""
+    import twin.radiation.model as model_module
+    from twin.radiation.cache import emissivity_path
+    from twin.radiation.model import build_matrices
+
+    builds = []
+    real = model_module.build_matrices
+    monkeypatch.setattr(model_module, "build_matrices", lambda F, o: builds.append(1) or real(F, o))
+    rad = radiation_model(tiny, cache_dir=tmp_path)
+    eps = tiny.specimen.emissivity * 1.02
+    first = rad.with_specimen_emissivity(eps)
+    again = radiation_model(tiny, cache_dir=tmp_path).with_specimen_emissivity(eps)
+    assert len(builds) == 1 and emissivity_path(rad.cache_file, eps).is_file()
+    expected = build_matrices(rad.exchange, rad.optics.with_specimen_emissivity(eps))  # the oracle: a fresh build
+    for got in (first, again):
+        assert got.P1.tobytes() == expected[0].tobytes() and got.P2.tobytes() == expected[1].tobytes()
+    assert not np.array_equal(rad.with_specimen_emissivity(eps * 1.01).P1, first.P1) and len(builds) == 2
+    emissivity_path(rad.cache_file, eps).write_bytes(b"not an npz")
+    with caplog.at_level(logging.WARNING):
+        rebuilt = rad.with_specimen_emissivity(eps)
+    assert "unreadable emissivity matrices" in caplog.text and len(builds) == 3
+    assert rebuilt.P1.tobytes() == expected[0].tobytes()

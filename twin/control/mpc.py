@@ -90,6 +90,11 @@ def horizon_end(j: int, H: int, every: int, N: int) -> int:
     return end if end > j else ((j // every) + 1) * every
 
 
+def anti_windup_deltas(u_ff: Array, delta0: float) -> Array:
+    """delta of Remark 5 (:func:`twin.control.lqg.anti_windup_delta`) of each row of u_ff (N, m)."""
+    return np.array([anti_windup_delta(u, delta0) for u in u_ff], dtype=float).reshape(len(u_ff))
+
+
 @dataclass
 class Prediction:
     """The condensed QP's pieces for one sample (exposed for the tests)."""
@@ -144,10 +149,12 @@ def _segments(j: int, end: int, N: int, every: int) -> list[tuple[int, int, int]
 
 def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1: float, r0: float,
                  delta0: float, j: int, e0: Array, u_prev: Array | None, s: MPCSettings,
-                 with_rates: bool = True, cache: dict[int, SegmentPowers] | None = None) -> Prediction:
+                 with_rates: bool = True, cache: dict[int, SegmentPowers] | None = None,
+                 plan_deltas: Array | None = None) -> Prediction:
     """The MPC's QP at sample j from the augmented error e0 = [theta_hat - theta_ref,j ; e_I] (module docstring).
 
-    ``cache``: :class:`SegmentPowers` of the held linearisations by key, kept between samples of one plan."""
+    ``cache``: :class:`SegmentPowers` of the held linearisations by key, kept between samples of one plan;
+    ``plan_deltas``: :func:`anti_windup_deltas` of the plan's u_ff (made once per plan instead of per sample)."""
     n = e0.size - 1
     N = plan.n_steps
     every = gains.jacobian_every
@@ -162,12 +169,14 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     d_free = e0[:n].copy()
     Gd = np.zeros((n, nz))
     Hess = np.zeros((nz, nz))
+    eye_m = np.eye(m)
     for b, length in enumerate(blocks):
-        Hess[b * m:(b + 1) * m, b * m:(b + 1) * m] += r0 * length * np.eye(m)
+        Hess[b * m:(b + 1) * m, b * m:(b + 1) * m] += r0 * length * eye_m
     c = np.asarray(c_m, float)
     t_s = plan.t_s
-    u_ff = np.array([plan.sample(j + k)[0] for k in range(H)])
-    deltas = np.array([anti_windup_delta(u, delta0) for u in u_ff])
+    rows_ff = np.minimum(np.arange(j, end), N - 1)  # plan.sample(j + k): the last input held beyond the plan
+    u_ff = plan.u_ff[rows_ff]
+    deltas = plan_deltas[rows_ff] if plan_deltas is not None else anti_windup_deltas(u_ff, delta0)
     Y, yf = np.empty((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
     for k0, L, key in _segments(j, end, N, every):
         powers = store.get(key)
@@ -200,29 +209,20 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     Hess += G_full.T @ PT @ G_full
     grad += G_full.T @ (PT @ x_free)
     # bounds per move: u in [0, 1] at every sample it is held
-    lbx, ubx = np.empty(nz), np.empty(nz)
     starts = np.cumsum([0, *blocks[:-1]])
-    for b, (k0, length) in enumerate(zip(starts, blocks, strict=True)):
-        seg = u_ff[k0:k0 + length]
-        lbx[b * m:(b + 1) * m] = np.max(-seg, axis=0)
-        ubx[b * m:(b + 1) * m] = np.min(1.0 - seg, axis=0)
+    lbx = np.maximum.reduceat(-u_ff, starts, axis=0).ravel()  # per move: max(-u_ff), min(1 - u_ff) of its samples
+    ubx = np.minimum.reduceat(1.0 - u_ff, starts, axis=0).ravel()
     if u_prev is not None:  # the first move's rate, as bounds (always feasible: u_prev is in [0, 1])
         lbx[:m] = np.maximum(lbx[:m], u_prev - s.rate - u_ff[0])
         ubx[:m] = np.minimum(ubx[:m], u_prev + s.rate - u_ff[0])
-    rows = []
-    lba, uba = [], []
-    if with_rates:
-        for b in range(1, len(blocks)):
-            jump = u_ff[starts[b]] - u_ff[starts[b] - 1]
-            R = np.zeros((m, nz))
-            R[:, b * m:(b + 1) * m] = np.eye(m)
-            R[:, (b - 1) * m:b * m] = -np.eye(m)
-            rows.append(R)
-            lba.append(-s.rate - jump)
-            uba.append(s.rate - jump)
-    A = np.vstack(rows) if rows else np.zeros((0, nz))
-    qp = QP(H=0.5 * (Hess + Hess.T), g=grad, A=A, lba=np.concatenate(lba) if lba else np.zeros(0),
-            uba=np.concatenate(uba) if uba else np.zeros(0), lbx=lbx, ubx=np.maximum(ubx, lbx))
+    n_rates = len(blocks) - 1 if with_rates else 0
+    A = np.zeros((n_rates * m, nz))
+    for b in range(1, n_rates + 1):  # u of move b minus u of move b - 1, within the rate bound
+        A[(b - 1) * m:b * m, b * m:(b + 1) * m] = eye_m
+        A[(b - 1) * m:b * m, (b - 1) * m:b * m] = -eye_m
+    jump = (u_ff[starts[1:]] - u_ff[starts[1:] - 1])[:n_rates].ravel()
+    qp = QP(H=0.5 * (Hess + Hess.T), g=grad, A=A, lba=-s.rate - jump, uba=s.rate - jump, lbx=lbx,
+            ubx=np.maximum(ubx, lbx))
     return Prediction(qp, blocks, u_ff)
 
 
@@ -238,6 +238,8 @@ class MPCController(Controller):
     step_ms: list[float] = field(default_factory=list)
     #: the held linearisations' powers of this plan (condensed_qp's cache)
     powers: dict[int, SegmentPowers] = field(default_factory=dict)
+    #: delta of Remark 5 at every sample of this plan (condensed_qp's ``plan_deltas``), made at the first sample
+    deltas: Array | None = None
 
     def __post_init__(self) -> None:
         if self.settings is None:
@@ -259,10 +261,12 @@ class MPCController(Controller):
         Kj = self.gains.at(j)
         for key in [k for k in self.powers if 0 <= k < j // self.gains.jacobian_every]:
             del self.powers[key]  # stretches behind: ~1 MB each
+        if self.deltas is None:
+            self.deltas = anti_windup_deltas(self.plan.u_ff, w.delta0)
         du = None
         for with_rates in (True, False):
             pred = condensed_qp(self.gains, self.plan, c_m, w.q0, w.q1, w.r0, w.delta0, j, e, self.u_prev,
-                                self.settings, with_rates, self.powers)
+                                self.settings, with_rates, self.powers, self.deltas)
             res = self.solver.solve(pred.qp)
             if res.ok:
                 du = res.z[: u_ff.size]

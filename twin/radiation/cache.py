@@ -152,6 +152,40 @@ def load_or_compute(
         return table
 
 
+def emissivity_path(table_file: Path, eps: float) -> Path:
+    """Where P1, P2 of the table in ``table_file`` for the specimen emissivity ``eps`` are kept: beside it, named
+    by the exact float (``float.hex``), so a hit returns the matrices a build would make, to the bit."""
+    return table_file.with_name(f"{table_file.stem}-emissivity-{float(eps).hex()}.npz")
+
+
+def emissivity_matrices(table_file: Path, eps: float, build: Callable[[], tuple[Array, Array]]) -> tuple[Array, Array]:
+    """P1, P2 (eq. 5) of a cached table with the specimen emissivity ``eps``: from the cache beside ``table_file``,
+    else ``build()`` and stored there (atomically, float64 as built; a file that cannot be read is rebuilt).
+    They are only as valid as the table beside them: both are named by its digest and :data:`FORMAT_VERSION`."""
+    path = emissivity_path(Path(table_file), eps)
+    if path.exists():
+        try:
+            with np.load(path) as z:
+                return np.asarray(z["P1"]), np.asarray(z["P2"])
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("unreadable emissivity matrices %s (%s); rebuilding", path, exc)
+    P1, P2 = build()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, P1=P1, P2=P2)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError as exc:  # a read-only cache: the matrices are still right, only not kept
+        log.warning("could not keep the emissivity matrices in %s: %s", path, exc)
+    return P1, P2
+
+
 def precompute_seconds(cfg: FurnaceConfig, *, symmetric: bool = False) -> float:
     """Wall time (s) of a cold computation of the whole table into a temporary cache dir (for the bench)."""
     with tempfile.TemporaryDirectory(prefix="furnace-twin-bench-") as d:

@@ -101,6 +101,9 @@ class RadiationModel:
     lamp_flux_max: Array
     exchange: NDArray[Any]
     optics: SurfaceOptics
+    #: the disk cache's file of this table (:func:`radiation_model`); matrices for another specimen emissivity
+    #: are kept beside it (:meth:`with_specimen_emissivity`).  None: built every time (a table made in memory)
+    cache_file: Path | None = None
 
     @property
     def n_specimen(self) -> int:
@@ -138,9 +141,18 @@ class RadiationModel:
         return q
 
     def with_specimen_emissivity(self, eps: float) -> RadiationModel:
-        """The same furnace with another specimen emissivity (plant mismatch); F^s is reused."""
+        """The same furnace with another specimen emissivity (plant mismatch, the model's emissivity
+        sensitivity); F^s is reused.  P1, P2 of eq. (5) for ``eps`` depend on F^s, the optics and ``eps`` alone
+        (the specimen's optics are set, not scaled): with a cached table they are built once and kept beside it
+        (:func:`twin.radiation.cache.emissivity_matrices`), not again in every run (a 240 s default run built
+        them three times, about 1.5 s each)."""
         optics = self.optics.with_specimen_emissivity(eps)
-        P1, P2 = build_matrices(self.exchange, optics)
+        if self.cache_file is None:
+            P1, P2 = build_matrices(self.exchange, optics)
+        else:
+            from twin.radiation.cache import emissivity_matrices
+
+            P1, P2 = emissivity_matrices(self.cache_file, float(eps), lambda: build_matrices(self.exchange, optics))
         return replace(self, P1=P1, P2=P2, optics=optics)
 
 
@@ -170,7 +182,7 @@ def radiation_model(
     symmetric : trace with the chamber's mirror symmetries (:mod:`twin.radiation.symmetry`), cached apart
     on_position : ``on_position(done, total)`` as positions are ray-traced (not called on a cache hit)
     """
-    from twin.radiation.cache import load_or_compute
+    from twin.radiation.cache import cache_path, load_or_compute
 
     table = load_or_compute(cfg, cache_dir=cache_dir, progress=progress, symmetric=symmetric,
                             on_position=on_position)
@@ -184,4 +196,5 @@ def radiation_model(
         lamp_flux_max=lamp_flux_max(cfg),
         exchange=table.F,
         optics=table.optics,
+        cache_file=cache_path(cfg, cache_dir, symmetric=symmetric),
     )

@@ -51,7 +51,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -122,6 +122,8 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
 
             furnace = SimulatedFurnace.for_scenario(cfg, scenario, self.radiation)
         self.furnace: Furnace = furnace
+        # asked once: isinstance against a runtime-checkable Protocol costs 0.1 ms, at every sample it was 1 % of one
+        self._fault_account = isinstance(furnace, FaultInjectable)
         self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
         self._budget = budget
@@ -224,8 +226,8 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             self._note_lateness(readings, t)
             self._events.extend(self.furnace.drain_events())
             eta = self.furnace.motion(t).eta
-            if isinstance(self.furnace, FaultInjectable):  # the furnace's own account, for the record only
-                self._events.extend(self.furnace.take_fault_events())
+            if self._fault_account:  # the furnace's own account of injected faults, for the record only
+                self._events.extend(cast(FaultInjectable, self.furnace).take_fault_events())
             c0 = time.perf_counter()
             self._motion_for_detection(t)
             y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)

@@ -1,0 +1,126 @@
+"""The budget of a sample: what each part of :meth:`twin.runs.loop.ClosedLoop.step` costs (docs/performance.md).
+
+One default run (240 s, the default furnace, cached tables) is stepped with each part wrapped in a timer;
+the median and the mean per sample are reported per part, with the EKF's covariance propagation
+P = Phi P Phi^T + Q (eq. 15, :func:`twin.estimation.ekf.propagate_covariance`) as the floor: the one piece of
+per-sample work that is O(n^3) and cannot be skipped.  The wrappers add about a microsecond a call; the
+shares, not the absolute figures, are what a loaded machine reports truly.
+
+    python -m benchmarks.budget [--duration S] [--config NAME] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: (label, owner attribute of the loop or None for the loop itself, method name): the parts of a sample
+PARTS: tuple[tuple[str, str | None, str], ...] = (
+    ("furnace: read TCs", "furnace", "read"),
+    ("furnace: advance plant t_s", "furnace", "apply"),
+    ("fault detection: reading tests", "detector", "screen"),
+    ("EKF update (13)", "estimators", "update"),
+    ("fault detection: GLR update", "detector", "update"),
+    ("controller (MPC / LQG)", "controller", "control_at"),
+    ("field sigma (reported P)", "uncertainty", "field_sigma"),
+    ("field mean sigma", "uncertainty", "mean_sigma"),
+    ("shadow / calibration outputs", "estimators", "outputs"),
+    ("divergence guard", "_guard", "check"),
+    ("record append", "record", "append"),
+    ("EKF predict (14), (15)", "estimators", "predict"),
+    ("fault detection: GLR predict", "detector", "predict"),
+)
+FLOOR = "  of which covariance propagation (15)"
+
+
+def _timed(fn: Callable[..., Any], into: list[float]) -> Callable[..., Any]:
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            into.append(time.perf_counter() - t0)
+
+    return wrapper
+
+
+def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str, dict[str, float]]:
+    """``{part: {"median_ms", "mean_ms", "share"}}`` per sample of one default run, with ``"step"`` (the whole
+    :meth:`ClosedLoop.step`) and ``"other"`` (step minus the parts); share = mean / mean step."""
+    import twin.estimation.joint as joint
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    loop = ClosedLoop(cfg, Scenario(duration=duration), radiation)
+    times: dict[str, list[float]] = {label: [] for label, _, _ in PARTS}
+    times[FLOOR] = []
+    for label, owner, name in PARTS:
+        obj = getattr(loop, owner) if owner else loop
+        if obj is not None and hasattr(obj, name):
+            setattr(obj, name, _timed(getattr(obj, name), times[label]))
+    floor = joint.propagate_covariance
+    joint.propagate_covariance = _timed(floor, times[FLOOR])  # type: ignore[assignment]
+    step: list[float] = []
+    try:
+        while not loop.done:
+            t0 = time.perf_counter()
+            loop.step()
+            step.append(time.perf_counter() - t0)
+    finally:
+        joint.propagate_covariance = floor  # type: ignore[assignment]
+        loop.close()
+    n = len(step)
+    total = float(np.sum(step))
+    out: dict[str, dict[str, float]] = {}
+
+    def row(values: list[float] | np.ndarray, calls: int) -> dict[str, float]:
+        v = np.asarray(values, float)
+        return {"median_ms": 1e3 * float(np.median(v)) if v.size else 0.0, "mean_ms": 1e3 * float(v.sum()) / n,
+                "share": float(v.sum()) / total, "calls_per_sample": calls / n}
+
+    out["step"] = row(step, n)
+    parts_sum = 0.0
+    for label in (*[p[0] for p in PARTS], FLOOR):
+        out[label] = row(times[label], len(times[label]))
+        if label != FLOOR:
+            parts_sum += float(np.sum(times[label]))
+    out["other (loop's own work)"] = {"median_ms": float("nan"), "mean_ms": 1e3 * (total - parts_sum) / n,
+                                      "share": (total - parts_sum) / total, "calls_per_sample": 1.0}
+    return out
+
+
+def format_budget(budget: dict[str, dict[str, float]]) -> str:
+    lines = [f"{'part':42s} {'median ms':>10s} {'mean ms':>9s} {'share':>7s} {'calls':>6s}"]
+    for label, r in budget.items():
+        lines.append(f"{label:42s} {r['median_ms']:10.3f} {r['mean_ms']:9.3f} {100 * r['share']:6.1f}% "
+                     f"{r['calls_per_sample']:6.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.budget", description=__doc__.splitlines()[0])
+    p.add_argument("--duration", type=float, default=240.0)
+    p.add_argument("--config", default=None, help="furnace TOML or shipped name (default: default)")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    from twin.config import load_config
+    from twin.radiation import radiation_model
+
+    cfg = load_config(args.config)
+    budget = sample_budget(cfg, radiation_model(cfg), args.duration)
+    sys.stdout.write((json.dumps(budget) if args.json else format_budget(budget)) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
