@@ -374,6 +374,9 @@ def comparison_table(before: list[dict[str, Any]], after: list[dict[str, Any]]) 
 def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
     from twin.studies.cluster import ClusterError
 
+    if not getattr(args, "verbose", False):  # as `furnace-twin study`: the scheduler's and nannies' INFO lines (and
+        # the tracebacks distributed logs at INFO when the LocalCluster closes its connections) stay out
+        logging.getLogger("distributed").setLevel(logging.WARNING)
     t_E = float(args.t_e) if args.t_e else 120.0
     if t_E <= 1.0:
         print("furnace-twin campaign: --t-e must be > 1 s", file=sys.stderr)  # noqa: T201
