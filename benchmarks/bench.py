@@ -18,6 +18,7 @@
 | stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
 | stream_latency_p95_ms | p95 latency from sample to frame, while 2 runs go at speed max (benchmarks.stream) |
 | rss_growth_mb | server memory growth over a 1 h run (simulated) at speed max; long_run_rtf: its speed |
+| campaign_wall_s | wall s of `campaign --seeds 2` (12 runs and their figures, tables cached), one worker per core |
 
 ``bench --hil [--duration S]`` measures hardware-in-the-loop timing instead (:mod:`benchmarks.hil`).
 
@@ -136,6 +137,24 @@ def run_wall_seconds(config: str | None = None, repeats: int = 3, duration: floa
     return float(np.median(walls))
 
 
+def campaign_wall_s(cfg: FurnaceConfig, *, seeds: int = 2, workers: int | None = None, t_E: float = 120.0) -> float:
+    """Wall seconds of ``furnace-twin campaign --seeds 2`` without the rerun recordings (the runs' files and
+    figures, the campaign's tables and figure; tables cached): on a LocalCluster of ``workers`` processes (default
+    one per core), ``workers=0`` one run after another in this process (the campaign before issue 21)."""
+    import tempfile
+    from pathlib import Path
+
+    from twin.experiments.campaign import run_campaign
+
+    with tempfile.TemporaryDirectory(prefix="furnace-twin-bench-campaign-") as out:
+        t0 = time.perf_counter()
+        run_campaign(cfg, Path(out), t_E, seeds=seeds, workers=workers)
+        wall = time.perf_counter() - t0
+    log.info("campaign_wall_s: %.1f s (%s seeds, workers %s)", wall, seeds, "in process" if workers == 0 else
+             workers or "one per core")
+    return wall
+
+
 def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True, config: str | None = None) -> dict[str, float]:
     from twin.control.feedforward import ocp_seconds
     from twin.control.replan import replan_seconds
@@ -161,6 +180,8 @@ def run_bench(cfg: FurnaceConfig, *, include_stream: bool = True, config: str | 
 
     truth_radiation(cfg)  # the simulated furnace's table, cached (the run's other table is rad's)
     out["run_wall_s"] = run_wall_seconds(config)
+    log.info("bench: campaign, wall time")
+    out["campaign_wall_s"] = campaign_wall_s(cfg)
     if include_stream:
         from benchmarks.stream import stream_bench
 

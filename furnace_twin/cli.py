@@ -103,6 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "calibration memory's rule; in OUT/second_run)")
     s.add_argument("--experiments", nargs="+", default=None, metavar="NAME",
                    help="only these experiments (e.g. fixed_tc4_0.5); default all six")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, default=None,
+                       help="LocalCluster process workers for the runs (default: one per core)")
+    where.add_argument("--scheduler", default=None,
+                       help="address of a running Dask scheduler, e.g. tcp://host:8786 (the runs' files come back)")
 
     s = sub.add_parser("bench", help="performance figures")
     s.add_argument("--json", action="store_true")

@@ -39,7 +39,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("backend.streaming",),  # frames, fan-out, series, rerun viewer
     ("backend.core",),  # settings, security, errors
     ("twin",),  # the public API (twin/__init__.py): the names a script uses, imported on first use
-    ("twin.experiments", "twin.studies"),  # what a user runs: a run, the campaign, design studies
+    ("twin.experiments",),  # what a user runs: a run, the campaign (its runs on the study engine's cluster)
+    ("twin.studies",),  # design studies on Dask
     ("twin.runs",),  # the loop, its record, metrics
     ("twin.estimation", "twin.control"),  # the twin side
     ("twin.furnace",),  # the furnace side

@@ -51,15 +51,17 @@ def test_scenarios_are_the_papers_six():
     assert all(s.duration == 2 * s.reference.t_E for _, s in sc)
 
 
-def _reduced(out: Path, small_radiation: Any, small_truth_radiation: Any) -> dict[str, Any]:
+def _reduced(out: Path, small_radiation: Any, small_truth_radiation: Any, workers: int = 0) -> dict[str, Any]:
     return run_campaign(small_config(), out, t_E=T_E, radiation=small_radiation, seeds=SEEDS,
-                        truth_radiation=small_truth_radiation, figures=False)
+                        truth_radiation=small_truth_radiation, figures=False, workers=workers)
 
 
 @pytest.fixture(scope="module")
 def campaign(tmp_path_factory, small_radiation, small_truth_radiation):
+    """The reduced campaign on a LocalCluster of 2 process workers (issue 21): the stored figures, made by the
+    serial campaign, are what the runs on the workers must reproduce."""
     out = tmp_path_factory.mktemp("campaign")
-    return out, _reduced(out, small_radiation, small_truth_radiation)
+    return out, _reduced(out, small_radiation, small_truth_radiation, workers=2)
 
 
 def test_reduced_campaign_writes_every_seed(campaign):
@@ -175,6 +177,28 @@ def test_reduced_campaign_reproduces_the_stored_figures(campaign):
     moved = {k: (v, got[k]) for k, v in expected["values"].items()
              if (v is None) != (got[k] is None) or (v is not None and not math.isclose(v, got[k], abs_tol=TOLERANCE))}
     assert not moved, f"{len(moved)} campaign figures moved (expected, got): {moved}"
+
+
+def test_a_run_shipped_back_from_a_worker_writes_the_same_files(campaign, tmp_path):
+    """A worker that may be on another machine (``--scheduler``) writes its run into a temporary folder and sends
+    the files back; written by the client they are byte for byte those a LocalCluster worker wrote in place."""
+    from twin.experiments.campaign_runs import CampaignRun, run_campaign_run, write_shipped
+
+    out, result = campaign
+    cfg = small_config()
+    name = "fixed_tc4_0.5"
+    scenario = dict(campaign_scenarios(cfg, T_E))[name].model_copy(update={"seed": 1, "truth": "independent"})
+    task = CampaignRun(name, 1, str(tmp_path / name / "seed_1"), scenario.to_json(), cfg.digest(), own_truth=True,
+                       figures=False, ship=True)
+    run = run_campaign_run(task, cfg.model_dump(mode="json"))  # as a worker runs it: tables from its cache
+    assert not (tmp_path / name).exists() and set(run["files"]) == {"metrics.json", "scenario.json",
+                                                                   "timeseries.npz"}
+    write_shipped(run)
+    here, there = tmp_path / name / "seed_1", out / name / "seed_1"
+    for f in run["files"]:
+        assert (here / f).read_bytes() == (there / f).read_bytes(), f
+    seed = next(s for e in result["experiments"] if e["name"] == name for s in e["seeds"] if s["seed"] == 1)
+    assert run["metrics"] == seed["metrics"]
 
 
 if __name__ == "__main__" and "--regenerate" in sys.argv:

@@ -26,8 +26,9 @@ def _result(controller: str, err: float) -> dict:
 def test_both_controllers_and_a_second_run(tmp_path, monkeypatch, capsys) -> None:
     asked = []
 
-    def fake(cfg, out, t_E, sink_factories=(), *, seeds, truth, estimator, feedback=None, learnt=None, only=None):
-        asked.append((out, feedback, learnt, only))
+    def fake(cfg, out, t_E, sink_factories=(), *, seeds, truth, estimator, feedback=None, learnt=None, only=None,
+             workers=None, scheduler=None):
+        asked.append((out, feedback, learnt, only, workers, scheduler))
         out.mkdir(parents=True, exist_ok=True)
         second = learnt is not None
         return _result(feedback, {("lqg", False): 0.022, ("mpc", False): 0.011, ("lqg", True): 0.02,
@@ -35,8 +36,10 @@ def test_both_controllers_and_a_second_run(tmp_path, monkeypatch, capsys) -> Non
 
     monkeypatch.setattr(camp, "run_campaign", fake)
     args = argparse.Namespace(t_e=None, seeds=2, out=str(tmp_path), truth="independent", estimator="default",
-                              json=True, controller="both", calibration="learn", experiments=["fixed_tc4_0.5"])
+                              json=True, controller="both", calibration="learn", experiments=["fixed_tc4_0.5"],
+                              workers=3)
     assert camp.campaign_command(small_config(), args) == 0
+    assert all(a[4:] == (3, None) for a in asked)  # every campaign of the command on the cluster it asked for
     assert [(a[0], a[1], a[3]) for a in asked] == [
         (tmp_path, "lqg", ["fixed_tc4_0.5"]), (tmp_path / "mpc", "mpc", ["fixed_tc4_0.5"]),
         (tmp_path / "second_run", "lqg", ["fixed_tc4_0.5"]), (tmp_path / "mpc/second_run", "mpc", ["fixed_tc4_0.5"])]

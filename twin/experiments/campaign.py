@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+import uuid
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -170,6 +171,10 @@ def run_campaign(
     feedback: str | None = None,
     learnt: dict[tuple[str, int], Any] | None = None,
     only: Iterable[str] | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    ship: bool = False,
 ) -> dict[str, Any]:
     """Run the six experiments, each with the seeds 0 .. seeds - 1; return the product.md ``campaign --json``
     object.  Each experiment's ``metrics`` are the worst over its seeds; ``model_error`` is the twin's model
@@ -181,35 +186,34 @@ def run_campaign(
     ``mpc``, None: the furnace's ``[control] feedback``) is every run's ``control.feedback``; ``learnt`` maps
     (experiment, seed) to the plan parameters a run starts from (a second run of the same recipe, issue 26);
     ``only`` keeps the experiments of these names.
+
+    Where the runs go (:mod:`twin.experiments.campaign_runs`): on ``client`` (a ``distributed.Client``; ``ship``
+    when its workers may be on other machines), else on the Dask scheduler at ``scheduler`` (files shipped
+    back), else on a LocalCluster of ``workers`` processes (default: one per core); ``workers=0`` runs them
+    here, one after another, with ``radiation`` and ``truth_radiation`` if given.  The results do not depend
+    on where the runs went.  Raises :class:`twin.studies.cluster.ClusterError` when the cluster cannot be
+    started or reached.
     """
+    from twin.experiments.campaign_runs import CampaignRun, run_campaign_run
     from twin.experiments.figures import plot_homogeneity_comparison
-    from twin.experiments.model_error import open_loop_model_error
-    from twin.experiments.run import execute_run
-    from twin.furnace.simulated import SimulatedFurnace
-    from twin.furnace.simulated.truth import truth_radiation as load_truth_radiation
-    from twin.jsonable import jsonable
-    from twin.radiation import radiation_model
-    from twin.runs.loop import ClosedLoop
 
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
     if estimator not in ESTIMATORS:
         raise ValueError(f"estimator must be one of {sorted(ESTIMATORS)}, got {estimator!r}")
+    if workers is not None and workers < 0:
+        raise ValueError(f"workers must be >= 0 (0: in this process), got {workers}")
     chosen = ESTIMATORS[estimator]
-    plan_cache: dict[Any, Any] = {}
-    sinks = list(sink_factories)
-    rad = radiation if radiation is not None else radiation_model(cfg)
-    own = None
-    if truth == "independent":
-        own = truth_radiation if truth_radiation is not None else load_truth_radiation(cfg)
     out.mkdir(parents=True, exist_ok=True)
-    experiments: list[dict[str, Any]] = []
-    series: dict[str, Any] = {}
     wanted = None if only is None else set(only)
+    digest = cfg.digest()
+    ship = ship or (client is None and scheduler is not None)
+    tasks: list[CampaignRun] = []
+    bases: dict[str, Scenario] = {}
     for name, base in campaign_scenarios(cfg, t_E):
         if wanted is not None and name not in wanted:
             continue
-        runs: list[dict[str, Any]] = []
+        bases[name] = base
         for seed in range(seeds):
             update: dict[str, Any] = {"seed": seed, "truth": truth}
             if chosen is not None:
@@ -217,27 +221,38 @@ def run_campaign(
             plan_parameters = None if learnt is None else learnt.get((name, seed))
             update["control"] = ControlSpec(feedback=feedback, plan_parameters=plan_parameters)  # type: ignore[arg-type]
             scenario = base.model_copy(update=update)
-            log.info("campaign: %s, seed %d (truth %s, %s estimator)", name, seed, truth, estimator)
-            folder = out / name / f"seed_{seed}"
-            furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own)
-            loop = ClosedLoop(cfg, scenario, rad, furnace=furnace, plan_cache=plan_cache)
-            result = execute_run(loop, folder, sink_factories=sinks, figures=figures)
-            ts = loop.timeseries()
-            if seed == 0:
-                series[name] = ts
-            runs.append({
-                "seed": seed,
-                "metrics": jsonable({k: v for k, v in result.items() if k not in ("out", "status", "status_reason")}),
-                "model_error": jsonable(open_loop_model_error(cfg, ts, rad)),
-                "out": str(folder),
-            })
+            folder = (out / name / f"seed_{seed}").absolute()  # a worker's working directory may differ
+            tasks.append(CampaignRun(name, seed, str(folder), scenario.to_json(), digest,
+                                     own_truth=truth == "independent", figures=figures, ship=ship,
+                                     keep_series=seed == 0))
+    log.info("campaign: %d runs (truth %s, %s estimator)", len(tasks), truth, estimator)
+    sinks = list(sink_factories)
+    if workers == 0 and client is None and scheduler is None:
+        from twin.furnace.simulated.truth import truth_radiation as load_truth_radiation
+        from twin.radiation import radiation_model
+
+        rad = radiation if radiation is not None else radiation_model(cfg)
+        own = None
+        if truth == "independent":
+            own = truth_radiation if truth_radiation is not None else load_truth_radiation(cfg)
+        plan_cache: dict[Any, Any] = {}
+        runs = [run_campaign_run(t, sink_factories=sinks, local=(cfg, rad, own), plan_cache=plan_cache)
+                for t in tasks]
+    else:
+        runs = _on_cluster(cfg, tasks, sinks, truth == "independent", client, workers, scheduler)
+    experiments: list[dict[str, Any]] = []
+    series: dict[str, Any] = {}
+    for name, base in bases.items():
+        mine = [r for r in runs if r["name"] == name]
+        series.update((name, r["series"]) for r in mine if r["series"] is not None)  # seed 0's
         experiments.append({
             "name": name,
             "oscillation": base.oscillation.enabled,
             "tc4": list(base.tc4),
-            "metrics": worst([r["metrics"] for r in runs]),
-            "model_error": worst([r["model_error"] for r in runs]),
-            "seeds": [{k: r[k] for k in ("seed", "metrics", "out")} for r in runs],
+            "metrics": worst([r["metrics"] for r in mine]),
+            "model_error": worst([r["model_error"] for r in mine]),
+            "seeds": [{"seed": r["seed"], "metrics": r["metrics"], "out": str(out / name / f"seed_{r['seed']}")}
+                      for r in mine],
         })
     pairs = [
         (f"TC4 at ({x:g} L_s, {y:g} W_s)", series[f"fixed_tc4_{x:g}"], series[f"oscillating_tc4_{x:g}"])
@@ -252,6 +267,44 @@ def run_campaign(
     (out / "campaign.json").write_text(json.dumps(result, indent=2))
     (out / "campaign.md").write_text(campaign_report(result, t_E))
     return result
+
+
+def _on_cluster(
+    cfg: FurnaceConfig, tasks: list[Any], sinks: list[Any], own_truth: bool, client: Any, workers: int | None,
+    scheduler: str | None,
+) -> list[dict[str, Any]]:
+    """The runs on Dask, in the order of ``tasks``; shipped files are written as each run arrives.  Once the
+    cluster answers, the tables are made sure of here, so the workers only load them (a worker never
+    ray-traces)."""
+    from contextlib import nullcontext
+
+    from twin.experiments.campaign_runs import ensure_tables, group_by_plan, run_campaign_runs, write_shipped
+    from twin.studies.cluster import study_client
+
+    where = nullcontext((client, 0)) if client is not None else study_client(workers=workers, scheduler=scheduler)
+    with where as (cl, n):
+        from distributed import as_completed
+
+        ensure_tables(cfg, own_truth)
+        if n:
+            log.info("campaign: %d runs on %d Dask workers", len(tasks), n)
+        furnace = cl.scatter(cfg.model_dump(mode="json"), broadcast=True, hash=False)
+        tag = uuid.uuid4().hex[:8]
+        futures = {cl.submit(run_campaign_runs, group, furnace, sinks, pure=False,
+                             key=f"furnace-twin-campaign-{group[0].name}-seed{group[0].seed}-{tag}"): group
+                   for group in group_by_plan(tasks)}
+        position = {(t.name, t.seed): i for i, t in enumerate(tasks)}
+        runs: list[dict[str, Any] | None] = [None] * len(tasks)
+        try:
+            for fut in as_completed(list(futures)):
+                for run in fut.result():  # a run that failed raises here, as in the serial campaign
+                    write_shipped(run)
+                    run["files"] = None
+                    runs[position[(run["name"], run["seed"])]] = run
+                fut.release()
+        finally:
+            cl.cancel([f for f in futures if not f.done()])
+    return [r for r in runs if r is not None]
 
 
 def campaign_report(result: dict[str, Any], t_E: float) -> str:
@@ -319,6 +372,11 @@ def comparison_table(before: list[dict[str, Any]], after: list[dict[str, Any]]) 
 
 
 def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFactory] = ()) -> int:
+    from twin.studies.cluster import ClusterError
+
+    if not getattr(args, "verbose", False):  # as `furnace-twin study`: the scheduler's and nannies' INFO lines (and
+        # the tracebacks distributed logs at INFO when the LocalCluster closes its connections) stay out
+        logging.getLogger("distributed").setLevel(logging.WARNING)
     t_E = float(args.t_e) if args.t_e else 120.0
     if t_E <= 1.0:
         print("furnace-twin campaign: --t-e must be > 1 s", file=sys.stderr)  # noqa: T201
@@ -335,20 +393,30 @@ def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[Sin
     feedback = None if controller in ("default", "both") else controller
     if controller == "both":
         feedback = "lqg"
-    common: dict[str, Any] = {"sink_factories": sink_factories, "seeds": args.seeds, "truth": args.truth, "only": only}
-    result = run_campaign(cfg, out, t_E, estimator=first, feedback=feedback, **common)
-    if which == "both":  # the paper's estimator on the same plants and seeds, beside the default
-        result["paper_estimator"] = run_campaign(cfg, out / "paper_estimator", t_E, estimator="paper",
-                                                 feedback=feedback, **common)
-    if controller == "both":  # the MPC on the same plants and seeds, beside the LQG
-        result["mpc"] = run_campaign(cfg, out / "mpc", t_E, estimator=first, feedback="mpc", **common)
-    if calibration == "learn":  # each run again, its plan from what the first run of its recipe learnt
-        for key, folder in (("second_run", "second_run"), ("mpc_second_run", "mpc/second_run")):
-            base = result if key == "second_run" else result.get("mpc")
-            if base is None:
-                continue
-            result[key] = run_campaign(cfg, out / folder, t_E, estimator=first, feedback=base["controller"],
-                                       learnt=learnt_from(base, cfg), **common)
+    workers, scheduler = getattr(args, "workers", None), getattr(args, "scheduler", None)
+    if workers is not None and workers < 1:
+        print(f"furnace-twin campaign: --workers must be >= 1, got {workers}", file=sys.stderr)  # noqa: T201
+        return 2
+    # each campaign on the cluster: a LocalCluster of --workers processes (default one per core) or --scheduler's
+    common: dict[str, Any] = {"sink_factories": sink_factories, "seeds": args.seeds, "truth": args.truth,
+                              "only": only, "workers": workers, "scheduler": scheduler}
+    try:
+        result = run_campaign(cfg, out, t_E, estimator=first, feedback=feedback, **common)
+        if which == "both":  # the paper's estimator on the same plants and seeds, beside the default
+            result["paper_estimator"] = run_campaign(cfg, out / "paper_estimator", t_E, estimator="paper",
+                                                     feedback=feedback, **common)
+        if controller == "both":  # the MPC on the same plants and seeds, beside the LQG
+            result["mpc"] = run_campaign(cfg, out / "mpc", t_E, estimator=first, feedback="mpc", **common)
+        if calibration == "learn":  # each run again, its plan from what the first run of its recipe learnt
+            for key, folder in (("second_run", "second_run"), ("mpc_second_run", "mpc/second_run")):
+                base = result if key == "second_run" else result.get("mpc")
+                if base is None:
+                    continue
+                result[key] = run_campaign(cfg, out / folder, t_E, estimator=first, feedback=base["controller"],
+                                           learnt=learnt_from(base, cfg), **common)
+    except ClusterError as exc:  # the scheduler cannot be reached, has no workers, or a cluster cannot start
+        print(f"furnace-twin campaign: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
     if which == "both" or controller == "both" or calibration == "learn":
         (out / "campaign.json").write_text(json.dumps(result, indent=2))
         (out / "campaign.md").write_text(campaign_report(result, t_E))
@@ -358,3 +426,4 @@ def campaign_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[Sin
         sys.stdout.write(campaign_report(result, t_E))
         log.info("campaign written to %s", out)
     return 0
+

@@ -69,8 +69,12 @@ def study_client(workers: int | None = None, scheduler: str | None = None) -> It
             client.close()
         return
     n = workers or default_workers()
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.WARNING)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.WARNING)
+    except (RuntimeError, OSError) as exc:  # a worker process that cannot start (memory, a script without a
+        # `if __name__ == "__main__":` guard under spawn, ...)
+        raise ClusterError(f"cannot start a LocalCluster of {n} process workers: {exc}") from exc
     try:
         client = Client(cluster)
         try:
