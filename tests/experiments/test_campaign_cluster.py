@@ -64,3 +64,15 @@ def test_bad_workers_are_argparse_errors(argv, capsys):
 def test_a_negative_worker_count_is_refused(tmp_path):
     with pytest.raises(ValueError, match="workers must be >= 0"):
         run_campaign(small_config(), tmp_path, workers=-1)
+
+
+def test_the_local_clusters_workers_keep_glibcs_malloc_trim():
+    """dask's nannies set MALLOC_TRIM_THRESHOLD_=65536 in their workers; the study engine's LocalCluster does not
+    (it tripled the campaign's system time, twin.studies.cluster.NO_MALLOC_TRIM)."""
+    import os
+
+    from twin.studies.cluster import study_client
+
+    with study_client(workers=1) as (client, n):
+        env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    assert n == 1 and list(env.values()) == [None]
