@@ -104,8 +104,14 @@ def test_bad_study_file_exits_2_with_the_reason(tmp_path, capsys):
 
 def test_unreachable_scheduler_exits_2(tmp_path, capsys, monkeypatch):
     import twin.studies.cluster as cluster
+    import twin.studies.command as command
 
     monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 1.0)
+
+    def trace(_cfg):  # the wrong address is said before a missing table is traced (60 s on 2 idle cores)
+        raise AssertionError("radiation tables traced before the scheduler was asked")
+
+    monkeypatch.setattr(command, "_ensure_radiation_tables", trace)
     study = tmp_path / "s.toml"
     study.write_text("[base]\nduration = 12.0\n[grid]\ntc_noise = [1.0]\n")
     address = f"tcp://127.0.0.1:{_free_port()}"

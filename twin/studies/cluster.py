@@ -53,16 +53,30 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _connect(scheduler: str) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``scheduler``, or :class:`ClusterError` within
+    :data:`CONNECT_TIMEOUT_S`."""
+    from distributed import Client
+
+    try:
+        return Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+    except OSError as exc:
+        raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+
+
+def check_scheduler(scheduler: str) -> None:
+    """:class:`ClusterError` unless the scheduler at ``scheduler`` answers: asked before anything slow (a
+    missing radiation table's trace) so that a wrong address is said at once."""
+    _connect(scheduler).close()
+
+
 @contextmanager
 def study_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[tuple[Any, int]]:
     """A ``distributed.Client`` and its number of workers; the LocalCluster (if any) ends with the block."""
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except OSError as exc:
-            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        client = _connect(scheduler)
         try:
             try:
                 client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)

@@ -16,7 +16,7 @@ from typing import Any
 from twin.config import CONFIG_ENV_VAR, FurnaceConfig
 from twin.limits import furnace_name, scenario_limits
 from twin.studies.cases import expand, resolve_furnace
-from twin.studies.cluster import ClusterError
+from twin.studies.cluster import ClusterError, check_scheduler
 from twin.studies.spec import StudyError, load_study
 
 log = logging.getLogger(__name__)
@@ -42,8 +42,10 @@ def study_command(cfg: FurnaceConfig, args: Any) -> int:
         print(f"furnace-twin study: {exc}", file=sys.stderr)  # noqa: T201
         return 2
     out = Path(args.out) if args.out else default_out(args.file)
-    _ensure_radiation_tables(furnace)
     try:
+        if args.scheduler:  # a wrong address said at once, not after tracing a missing table
+            check_scheduler(args.scheduler)
+        _ensure_radiation_tables(furnace)
         summary = run_study(spec, furnace, out, furnace_name=name, workers=args.workers, scheduler=args.scheduler,
                             keep_series=args.keep_series, progress_bar=True, cases=cases)
     except ClusterError as exc:
