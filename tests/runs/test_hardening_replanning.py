@@ -49,7 +49,7 @@ def test_finding_01_request_bounded_by_run(model) -> None:
 def test_finding_01_loop_plans_only_its_duration(small_radiation) -> None:
     sc = Scenario.model_validate({"reference": {"setpoint": 1100.0, "t_E": 3600.0}, "duration": 5.0})
     loop = ClosedLoop(small_config(), sc, small_radiation)
-    plan = loop._ctl.plan
+    plan = loop.changes.current.plan
     assert plan.t[-1] <= 5.0 + 1.0 + 1e-9, plan.t[-1]  # one 1 s knot interval past the end, not 4320 s
     snaps = list(loop.run())
     assert snaps[-1].t == pytest.approx(5.0)
@@ -95,17 +95,17 @@ def _step_until(loop: ClosedLoop, futures, timeout: float = 300.0) -> None:
 
 def test_finding_10_change_in_force_only_with_its_plan(small_radiation) -> None:
     loop = _background_loop(small_radiation)
-    old_ref, old_plan = loop._ref_fn, loop._ctl.plan
+    old_ref, old_plan = loop.changes.reference, loop.changes.current.plan
     fut = loop.set_reference(TransitionReference(setpoint=700.0, t_E=5.0))
     s = loop.step()  # the plan is not ready: the old reference and plan go on
     assert not fut.done()
-    assert s.T_ref == pytest.approx(float(old_ref(s.t))) and loop._ctl.plan is old_plan
+    assert s.T_ref == pytest.approx(float(old_ref(s.t))) and loop.changes.current.plan is old_plan
     _step_until(loop, [fut])
     t_applied = fut.result()  # the run time of the first sample on the new plan
-    assert loop._ctl.plan is not old_plan and loop._ctl.plan.t0 <= t_applied
+    assert loop.changes.current.plan is not old_plan and loop.changes.current.plan.t0 <= t_applied
     later = [loop.step() for _ in range(100)]
     assert later[-1].T_ref == pytest.approx(700.0)  # 5 s transition after the plan came in
-    assert loop._reference_spec.setpoint == 700.0
+    assert loop.changes.reference_spec.setpoint == 700.0
     loop.close()
 
 
@@ -143,7 +143,7 @@ def test_finding_10_failed_replan_changes_nothing(small_radiation, monkeypatch) 
     from twin.control import feedforward
 
     loop = _background_loop(small_radiation)
-    before, old_ref = loop._reference_spec, loop._ref_fn
+    before, old_ref = loop.changes.reference_spec, loop.changes.reference
 
     def fail(*a, **k):
         raise feedforward.FeedforwardError("feedforward OCP failed: IPOPT status Infeasible_Problem_Detected",
@@ -156,7 +156,7 @@ def test_finding_10_failed_replan_changes_nothing(small_radiation, monkeypatch) 
         fut.result()
     snaps = [loop.step() for _ in range(60)]
     assert any("re-planning failed" in str(e) for e in loop.timeseries()["event_text"])
-    assert loop._reference_spec is before  # the old reference is still in force
+    assert loop.changes.reference_spec is before  # the old reference is still in force
     assert snaps[-1].T_ref == pytest.approx(float(old_ref(snaps[-1].t)))
     loop.close()
 
@@ -170,5 +170,5 @@ def test_finding_01_replan_beyond_budget_fails_and_changes_nothing(small_radiati
     _step_until(loop, [fut], timeout=60.0)
     with pytest.raises(PlanTooLarge, match="MB"):
         fut.result()
-    assert loop._reference_spec.setpoint == 900.0
+    assert loop.changes.reference_spec.setpoint == 900.0
     loop.close()

@@ -37,7 +37,7 @@ def test_field_sigma_is_recorded_beside_the_estimate(run) -> None:
     assert ts["sigma_mean"].shape == ts["nis"].shape == ts["nees"].shape == ts["t"].shape
     assert np.all(ts["field_sigma"] > 0) and np.all(ts["sigma_mean"] > 0)
     # the last sample's map is the reported covariance through the hat functions (an independent dense product)
-    fe = loop._ctl.model.fe
+    fe = loop.changes.current.model.fe
     P = loop.posterior[-1]
     dense = np.sqrt(np.einsum("ci,ij,cj->c", fe.M_theta, P, fe.M_theta) + loop.uncertainty.representation_var)
     np.testing.assert_allclose(snaps[-1].field_sigma.ravel(), dense, rtol=1e-10)

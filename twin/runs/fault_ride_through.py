@@ -10,8 +10,8 @@
   is believed to deliver (a failed group's column of B is 0: the OCP holds it at 0, the LQG leaves it);
 - :func:`reach_note`: what the groups left can hold (fillet mean at full power, the model's steady state)
   against the reference, for the event of the re-plan;
-- :class:`FaultRideThrough`: the loop's methods for it (injecting faults into its furnace, reporting the
-  detector's decisions, re-planning when a lamp group's state changed).
+- :class:`FaultRideThrough`: the loop's collaborator for it (switching the innovation tests, reporting the
+  detector's decisions, asking for a plan when a lamp group's state changed, injecting faults).
 
 Example
 -------
@@ -23,13 +23,12 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.furnace.interface import FaultInjectable, Furnace
@@ -53,6 +52,14 @@ def detection_mode_event(on: bool) -> str:
         return "fault detection: innovation tests on (reference held still)"
     return ("fault detection: while the reference moves the model cannot explain the TCs sample by sample: "
             "only TCs that drop out or stick are detected")
+
+
+class LampReplanner(Protocol):
+    """What :class:`FaultRideThrough` asks of the loop's plans (``twin.runs.live_changes.LiveChanges``)."""
+
+    def lamps_found(self, lamp_gains: NDArray[np.float64], what: str, t: float) -> Future[float]:
+        """Re-plan with the lamp groups believed to deliver ``lamp_gains`` of their power."""
+        ...
 
 
 def faulty_model(nominal: Any, lamp_gains: ArrayLike) -> Any:
@@ -79,50 +86,44 @@ def reach_note(cfg: FurnaceConfig, model: Any, lamp_gains: ArrayLike, T_end: flo
 
 
 class FaultRideThrough:
-    """The closed loop's part of the fault handling (``twin.runs.loop.ClosedLoop`` mixes it in)."""
+    """The closed loop's part of the fault handling, a collaborator of ``twin.runs.loop.ClosedLoop``.
 
-    furnace: Furnace
-    detector: Any  # twin.estimation.fault_detection.FaultDetector
-    j: int
-    t_s: float
-    _lock: threading.Lock
-    _events: list[str]
-    _ref_fn: Callable[[Any], Any]
-    _lamp_gains: Any
-    _lamps_change: str
-    _request: Callable[[str, str], Future[float]]
+    It switches the ``detector``'s innovation tests (:meth:`watch`), reports its decisions as events through
+    ``note`` and asks ``changes`` (:class:`twin.runs.live_changes.LiveChanges`) for a plan without a lamp group it
+    found weak or failed (:meth:`on_detections`), and injects faults into the ``furnace`` (:meth:`injectable`).
+    """
 
-    def _motion_for_detection(self, t: float) -> None:
-        """The detector's innovation tests while the estimator's model explains its innovations
-        (:func:`innovation_tests_wanted`)."""
-        on = innovation_tests_wanted(t, float(getattr(self._ref_fn, "t_end", 0.0)))
+    def __init__(self, furnace: Furnace, detector: Any, changes: LampReplanner, note: Callable[[str], None]) -> None:
+        self.furnace = furnace
+        self.detector = detector  # twin.estimation.fault_detection.FaultDetector
+        self._changes = changes
+        self._note = note
+
+    def watch(self, t: float, t_end: float) -> None:
+        """The detector's innovation tests at run time ``t`` while the estimator's model explains its innovations:
+        once a reference whose transition ends at ``t_end`` held still (:func:`innovation_tests_wanted`)."""
+        on = innovation_tests_wanted(t, t_end)
         if on != self.detector.innovation_tests:
-            self._events.append(detection_mode_event(on))
+            self._note(detection_mode_event(on))
         self.detector.set_innovation_tests(on)
 
-    def _on_detections(self, t: float, detections: Sequence[Any]) -> None:
+    def on_detections(self, t: float, detections: Sequence[Any]) -> None:
         """Report the detector's decisions; a lamp group's new state re-plans the feedforward without it."""
         for d in detections:
-            self._events.append(f"fault detected: {d.text}")
+            self._note(f"fault detected: {d.text}")
         lamps = [d for d in detections if d.target not in ("TC1", "TC2", "TC3", "TC4")]
         if lamps:
-            self._lamp_gains = self.detector.lamp_gains.copy()
             what = ", ".join(f"{d.target} {d.kind}" for d in lamps)
-            self._lamps_change = f"lamp group {what}"
             try:
-                self._request("lamps", f"lamp group {what} at t = {t:.1f} s")
+                self._changes.lamps_found(self.detector.lamp_gains.copy(), what, t)
             except Exception:  # inline planning failed: the old plan goes on (the loop's event says so)
                 log.exception("re-planning for lamp group %s failed", what)
 
-    def set_faults(self, faults: Sequence[FaultSpec]) -> None:
-        """Inject ``faults`` into the furnace from the next sample on (``at`` counts from then; empty clears).
-
-        Raises ValueError for a furnace that faults cannot be injected into (a real one).
-        """
+    def injectable(self) -> FaultInjectable:
+        """The furnace, to inject faults into; ValueError for one that cannot take them (a real one)."""
         if not isinstance(self.furnace, FaultInjectable):
             raise ValueError(f"faults can be injected only into a simulated furnace, not a {self.furnace.kind} one")
-        with self._lock:
-            self.furnace.set_faults(faults, self.j * self.t_s)
+        return self.furnace
 
     def faults_in_force(self) -> list[FaultSpec]:
         """The faults injected into the furnace (``at`` in run time); none for a real furnace."""

@@ -29,8 +29,13 @@ Live changes (:meth:`ClosedLoop.set_reference`, :meth:`ClosedLoop.set_oscillatio
 re-planned (feedforward, reference state, gains, model) from the current estimate, in a
 background thread when ``background=True`` (the backend) so the loop never stalls, and take
 effect together -- reference, furnace motion and plan -- at the first sample after the plan is
-ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing;
-:mod:`twin.runs.live_changes` holds the plans and the changes).
+ready (:mod:`twin.runs.replanning`: the latest change wins, a failed re-plan changes nothing).
+
+The loop composes its collaborators: ``self.changes`` (:class:`twin.runs.live_changes.LiveChanges`: the plan
+and the reference in force, the re-plans) and ``self.faults`` (:class:`twin.runs.fault_ride_through.FaultRideThrough`:
+the detector's decisions, fault injection).  Each sees the loop through a small protocol
+(:class:`twin.runs.live_changes.PlanHost`, a ``note`` callable); the loop's lock is taken around every call
+that may install a plan.
 Each returns a future of the run time of the first sample that uses the change (a points reference's
 times count from there; a plan made for an earlier sample moves there with its reference).  Plans never reach
 far beyond the run's end, and a :class:`twin.control.budget.PlanBudget` bounds and cancels them.
@@ -49,7 +54,8 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any, cast
 
@@ -67,17 +73,16 @@ from twin.physics.grid import cell_centers
 from twin.runs.estimators import RunEstimators
 from twin.runs.fault_ride_through import FaultRideThrough
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
-from twin.runs.live_changes import LiveChanges, _Plan
+from twin.runs.live_changes import LiveChanges, Plan
 from twin.runs.outage import BlindWatch, blind_cause, run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot
-from twin.runs.replanning import Replanner
 from twin.runs.series_store import SeriesStore, parts_dir
-from twin.scenario import OscillationSpec, Reference, Scenario
+from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 __all__ = ["ClosedLoop", "Snapshot"]
 
 
-class ClosedLoop(FaultRideThrough, LiveChanges):
+class ClosedLoop:
     """A furnace + EKF + feedforward/LQG for one scenario.
 
     Parameters
@@ -101,7 +106,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         *,
         furnace: Furnace | None = None,
         background: bool = False,
-        plan_cache: dict[Any, _Plan] | None = None,
+        plan_cache: dict[Any, Plan] | None = None,
         budget: PlanBudget | None = None,
     ) -> None:
         from twin.control.mpc import make_controller
@@ -126,52 +131,38 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         self._fault_account = isinstance(furnace, FaultInjectable)
         self.tables = model_tables(cfg, self.radiation)  # the twin's model terms at every position
         self._lock = threading.Lock()
-        self._budget = budget
-        self._replanner = Replanner(background, budget)
         self._events: list[str] = []
-        self._oscillation = scenario.oscillation
         #: samples with a reading that did not come in time (a real-time furnace); ``_late_run`` the current run
         self.late_samples = 0
         self._late_run = 0
-        # a change waiting for its plan: (spec, T_ref(t)) and the oscillation, in force when it is installed
-        self._wanted_reference: tuple[Reference, Callable[[Any], Any]] | None = None
-        self._wanted_oscillation: OscillationSpec | None = None
-        self._lamp_gains = np.ones(cfg.n_groups)  # believed fraction of each group's power (fault detection)
-        self._lamps_change = "lamp groups as the fault detection found them"  # its latest decision, for the event
 
         # --- the estimator and controller see only TC readings and their own inputs ---
         self.j = 0
         y0 = furnace.read(0.0).for_estimator()
         T0 = float(np.nanmean(y0)) if np.isfinite(y0).any() else float(cfg.specimen.initial_temperature)
         theta0 = np.full(len(cfg.fe.x_nodes) * len(cfg.fe.y_nodes), T0)
-        self._reference_spec: Reference = scenario.reference
-        self._T_range = self._reachable_range()
-        self._set_ref_fn(self._make_reference(scenario.reference, T0, t_start=0.0))
-        key = (scenario.oscillation.model_dump_json(), repr(scenario.reference), theta0.tobytes(),
-               scenario.control.model_dump_json())
-        learnt = scenario.control.plan_parameters  # what earlier runs of this furnace learnt (calibration memory)
-        first = Parameters() if learnt is None else Parameters(**learnt.model_dump())
-        if plan_cache is not None and key in plan_cache:
-            self._ctl = plan_cache[key]
-        else:
-            self._ctl = self._plan(scenario.oscillation, theta0, 0.0, self._ref_fn, None, first, budget=budget)
-            if plan_cache is not None:
-                plan_cache[key] = self._ctl
+        #: the plans, the reference in force and the live changes (the first plan is made here)
+        self.changes = LiveChanges(self, cfg, scenario, self.radiation, self.tables, n_steps=self.n_steps,
+                                   t_s=self.t_s, theta0=theta0, T0=T0, background=background, budget=budget,
+                                   plan_cache=plan_cache)
+        first = self.changes.current
         self.feedback = scenario.control.feedback or cfg.control.feedback
-        self.controller = make_controller(self.feedback, self._ctl.model, self._ctl.plan, self._ctl.gains, cfg)
+        self.controller = make_controller(self.feedback, first.model, first.plan, first.gains, cfg)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
-        self.detector = FaultDetector(cfg, self._ctl.nominal, n_parameters=self.estimator.k)
-        self._motion_for_detection(0.0)
+        self.detector = FaultDetector(cfg, first.nominal, n_parameters=self.estimator.k)
+        #: what the loop does about the faults the detector finds
+        self.faults = FaultRideThrough(furnace, self.detector, self.changes, self.note)
+        self.faults.watch(0.0, self.changes.reference.t_end)
 
         # --- output grid: FD cell centres; the record of the run ---
         s = cfg.specimen
         self.x, self.y = cell_centers(cfg)
         self.fillet = Fillet.of(cfg)
         self.tc_positions = np.asarray(furnace.tc_positions, float)
-        self._phi_tc = self._ctl.model.fe.phi(self.tc_positions)
+        self._phi_tc = first.model.fe.phi(self.tc_positions)
         model_error = cfg.ekf.model_error
-        self.uncertainty = FieldUncertainty(self._ctl.model.fe,
+        self.uncertainty = FieldUncertainty(first.model.fe,
                                             0.0 if model_error is None else model_error.representation_rms)
         self._has_truth = furnace.true_field() is not None
         header = RunHeader(
@@ -212,7 +203,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
     @property
     def replanning(self) -> bool:
         """A re-plan is being solved in the background (it is swapped in at the next sample when done)."""
-        return self._replanner.solving
+        return self.changes.solving
 
     def step(self) -> Snapshot:
         """Advance one sample; return the snapshot of sample j (before the furnace moves on)."""
@@ -221,7 +212,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         # a real-time furnace waits here for its sample: outside the lock, so readers are not held up
         readings = self.furnace.read(self.j * self.t_s)
         with self._lock:
-            self._replanner.poll()
+            self.changes.poll()
             j, t = self.j, self.j * self.t_s
             self._note_lateness(readings, t)
             self._events.extend(self.furnace.drain_events())
@@ -229,23 +220,24 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             if self._fault_account:  # the furnace's own account of injected faults, for the record only
                 self._events.extend(cast(FaultInjectable, self.furnace).take_fault_events())
             c0 = time.perf_counter()
-            self._motion_for_detection(t)
+            changes = self.changes
+            self.faults.watch(t, changes.reference.t_end)
             y = self.detector.screen(t, readings.values, readings.status)  # TCs found faulty left out (NaN)
             theta_prior = self.estimator.state.theta.copy()
-            holding = t >= getattr(self._ref_fn, "t_end", -np.inf)  # the reference holds still
+            holding = t >= changes.reference.t_end  # the reference holds still
             theta, shadow = self.estimators.update(y, learn=holding)  # eq. 13 (faulty readings gated inside)
             info = self.estimator.last_info
             used = info is not None and bool(np.any(info.used))  # blind: no TC reading reached the estimate
             why = "" if used else blind_cause(readings.status, self.detector.excluded, info)
             self._events.extend(self.blindness.note(t, used, why))
-            self._on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
-            due = None if self._replanner.busy else self.estimators.calibration_due(t, self._ctl.parameters, holding)
+            self.faults.on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
+            due = None if changes.busy else self.estimators.calibration_due(t, changes.current.parameters, holding)
             if due is not None:  # the controller's model follows the calibration (re-planned like a change)
-                self._request("calibration", due)
-            ctl = self._ctl
+                changes.request("calibration", due)
+            ctl = changes.current
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
             compute_s = time.perf_counter() - c0
-            T_ref = float(self._ref_samples[j])
+            T_ref = float(changes.ref_samples[j])
 
             field_hat = ctl.model.fe.field_on_cells(theta)  # the cells are self.x, self.y
             P = self.estimator.reported_P  # what the twin claims about its estimate (issue 25)
@@ -278,7 +270,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             c0 = time.perf_counter()
             # what the lamps are believed to deliver (a lamp group the fault detection found weak or failed; none
             # once a furnace out of reach has switched them off, as its watchdog does)
-            self.estimators.predict(self._lamp_gains * delivered(self.furnace, snap.u, t), eta)
+            self.estimators.predict(changes.lamp_gains * delivered(self.furnace, snap.u, t), eta)
             self.detector.predict(snap.u, theta, self.estimator.state.theta, self.estimator.parameter_jacobian)
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
@@ -303,7 +295,7 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
             yield self.step()
 
     def close(self) -> None:
-        self._replanner.close()
+        self.changes.close()
         self.furnace.close()
 
     # ------------------------------------------------------------------ results
@@ -325,3 +317,63 @@ class ClosedLoop(FaultRideThrough, LiveChanges):
         if self._series is None or self._series.dir != parts_dir(Path(folder)):
             self._series = SeriesStore(Path(folder))
         self._series.append(self.record)
+
+    def set_reference(self, spec: Reference) -> Future[float]:
+        """New reference from now on (times of a points reference count from now); re-plans.
+
+        Raises ValueError, before anything changes, if the reference is unreachable.  Returns a future of
+        the run time from which the reference (with its plan) is in force (:mod:`twin.runs.replanning`).
+        """
+        with self._lock:
+            return self.changes.set_reference(spec)
+
+    def set_oscillation(self, spec: OscillationSpec) -> Future[float]:
+        """Switch the specimen motion; the motion, model, plan and gains switch together once re-planned.
+        Returns a future of the run time from which it is in force."""
+        with self._lock:
+            return self.changes.set_oscillation(spec)
+
+    def set_faults(self, faults: Sequence[FaultSpec]) -> None:
+        """Inject ``faults`` into the furnace from the next sample on (``at`` counts from then; empty clears).
+
+        Raises ValueError for a furnace that faults cannot be injected into (a real one).
+        """
+        furnace = self.faults.injectable()
+        with self._lock:
+            furnace.set_faults(faults, self.j * self.t_s)
+
+    def faults_in_force(self) -> list[FaultSpec]:
+        """The faults injected into the furnace (``at`` in run time); none for a real furnace."""
+        return self.faults.faults_in_force()
+
+    # ------------------------------------------------------------------ for its collaborators (PlanHost, note)
+    def sample_time(self) -> float:
+        """Run time (s) of the sample about to be computed."""
+        return self.j * self.t_s
+
+    def estimate(self) -> tuple[np.ndarray, Parameters]:
+        """The primary estimator's theta (a copy) and calibrated parameters."""
+        return self.estimator.state.theta.copy(), self.estimator.parameters
+
+    def note(self, text: str) -> None:
+        """An event of the current sample (it goes out with the next snapshot)."""
+        self._events.append(text)
+
+    def in_force(self, t: float, kind: str, spec: Reference | OscillationSpec) -> None:
+        """A new reference or oscillation in force from ``t``: the furnace moves so, the record's windows know."""
+        if isinstance(spec, OscillationSpec):
+            self.furnace.set_oscillation(spec, t)
+        self.record.note_change(t, kind, spec.model_dump_json())
+
+    def adopt(self, plan: Plan, *, motion_changed: bool, fresh_integrator: bool) -> None:
+        """The controller on ``plan``; the integrator state carries over unless ``fresh_integrator`` (a plan that
+        models what it was making up for: a lamp group's lost power); a new motion switches the averaged estimators
+        and the detector to its period average with the controller."""
+        self.controller = self.controller.with_plan(plan.plan, plan.gains, plan.model)
+        if fresh_integrator:
+            from twin.control.lqg import IntegratorState
+
+            self.controller.state = IntegratorState()
+        if motion_changed:
+            self.estimators.switch_motion(plan.oscillation if plan.oscillation.enabled else None)
+            self.detector.set_model(plan.nominal)

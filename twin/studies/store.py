@@ -117,6 +117,8 @@ def results_table(cases: Sequence[Case], records: Mapping[str, Mapping[str, Any]
         cols[key] = pa.array([_float(r.get(key)) for r in rows], pa.float64())
     cols["warnings"] = pa.array([r.get("warnings") for r in rows], pa.int64())
     cols["worker"] = pa.array([r.get("worker") for r in rows], pa.string())
+    cols["ending"] = pa.array([r.get("ending") for r in rows], pa.string())  # the run's, as RunSession.end says
+    cols["ending_reason"] = pa.array([r.get("ending_reason") for r in rows], pa.string())
     cols["error"] = pa.array([r.get("error") for r in rows], pa.string())
     cols["scenario"] = pa.array([c.scenario.to_json() for c in cases], pa.string())
     return pa.table(cols)

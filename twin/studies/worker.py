@@ -117,13 +117,17 @@ def run_case(task: CaseTask, furnace: dict[str, Any]) -> dict[str, Any]:
 
     Returns the record of product.md's ``study --json`` case plus timings (s).
 
-    Record keys: ``key``, ``status`` ("done" | "failed"), ``metrics`` (None if failed), ``error``,
+    Record keys: ``key``, ``status`` ("done" | "failed"), ``metrics`` (None if failed; with the run's ``status``
+    and ``status_reason`` as the CLI's ``metrics.json``), ``error``, ``ending`` and ``ending_reason`` (the run's
+    ending as :meth:`twin.runs.session.RunSession.end` says it: finished, degraded, error, plant_lost; None when the
+    case failed before its loop was built),
     ``worker``, ``started``/``finished`` (unix s), ``setup_s`` (configuration and radiation tables),
     ``radiation_loaded``, ``plan_s`` (building the loop: model, feedforward OCP, gains), ``run_s``
     (the samples), ``metrics_s``, ``warnings`` (how many the case logged) with the first few
     ``warning_messages``, and ``series`` (``timeseries.npz`` bytes) with ``keep_series``.
     """
     rec: dict[str, Any] = {"key": task.key, "status": "failed", "metrics": None, "error": None,
+                           "ending": None, "ending_reason": None,
                            "worker": worker_name(), "started": time.time(), "setup_s": None,
                            "radiation_loaded": False, "plan_s": None, "run_s": None, "metrics_s": None,
                            "series": None}
@@ -154,13 +158,16 @@ def _run(task: CaseTask, furnace: dict[str, Any], rec: dict[str, Any], t0: float
         rec["plan_s"] = t2 - t1
         session = RunSession(loop)  # no folder: the record travels back to the client, which writes it
         try:
-            while not loop.done:
-                session.step()
+            result = session.run()  # to the end; the ending is known even when it raises
         finally:
-            session.close()
+            if session.ending is not None:
+                rec["ending"], rec["ending_reason"] = session.ending
         t3 = time.perf_counter()
         rec["run_s"] = t3 - t2
-        rec["metrics"] = jsonable(loop.metrics())
+        if "error" in result:  # the furnace was lost (logged by the session): the case did not finish
+            rec["error"] = result["error"]
+            return
+        rec["metrics"] = jsonable(result)
         if task.keep_series:  # the timeseries.npz layout (product.md); the client writes the file
             buf = io.BytesIO()
             np.savez_compressed(buf, **{k: np.asarray(v) for k, v in loop.timeseries().items()})  # type: ignore[arg-type]
