@@ -172,3 +172,56 @@ def test_finding_01_replan_beyond_budget_fails_and_changes_nothing(small_radiati
         fut.result()
     assert loop.changes.reference_spec.setpoint == 900.0
     loop.close()
+
+
+def test_the_budget_not_the_interactive_default_limits_ipopt(model, monkeypatch) -> None:
+    """With a budget, IPOPT's wall-time limit is the budget's remaining time (a server's ``plan_max_s``, a campaign's
+    BATCH_MAX_WALL_S), not ``solve_feedforward``'s interactive 120 s: a campaign on a loaded machine ended when one
+    plan hit 120 s.  Without a budget the default stays."""
+    import twin.control.feedforward as ff
+    from twin.control.budget import BATCH_MAX_WALL_S
+
+    seen: list[float] = []
+    real = ff._ipopt_options
+
+    def spy(max_iter, max_wall_s, extra):
+        seen.append(float(max_wall_s))
+        return real(max_iter, max_wall_s, extra)
+
+    monkeypatch.setattr(ff, "_ipopt_options", spy)
+    cfg = small_config()
+    ref = reference_trajectory(TransitionReference(setpoint=800.0, t_E=20.0), 300.0)
+    theta0 = np.full(model.n, 300.0)
+    ff.solve_feedforward(model, theta0, 0.0, ref, cfg, horizon=30.0, budget=PlanBudget(max_wall_s=BATCH_MAX_WALL_S))
+    ff.solve_feedforward(model, theta0, 0.0, ref, cfg, horizon=30.0)
+    assert BATCH_MAX_WALL_S - 60.0 < seen[0] <= BATCH_MAX_WALL_S and seen[1] == 120.0
+    assert BATCH_MAX_WALL_S >= 600.0  # a batch plan waits: 5x what a plan took at load 14 (27 iterations, 120 s)
+
+
+def test_a_campaign_run_plans_on_the_batch_budget(monkeypatch) -> None:
+    """The campaign's runs give their loop a budget of BATCH_MAX_WALL_S (the test stops at the loop's construction)."""
+    import twin.runs.loop as loop_module
+    from twin.control.budget import BATCH_MAX_WALL_S
+    from twin.experiments import campaign_runs
+
+    got: dict[str, object] = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_loop(*args, **kwargs):
+        got.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(loop_module, "ClosedLoop", fake_loop)
+    from twin.radiation import radiation_model
+    from twin.scenario import Scenario
+
+    cfg = small_config()
+    task = campaign_runs.CampaignRun(name="fixed_tc4_0.5", seed=0, folder="unused",
+                                     scenario_json=Scenario.model_validate({"truth": "shared"}).model_dump_json(),
+                                     furnace_digest=cfg.digest(), own_truth=False)
+    with pytest.raises(Stop):
+        campaign_runs.run_campaign_run(task, local=(cfg, radiation_model(cfg), None))
+    budget = got["budget"]
+    assert isinstance(budget, PlanBudget) and budget.max_wall_s == BATCH_MAX_WALL_S

@@ -118,6 +118,12 @@ class PlanEstimate:
         return TYPICAL_SWEEPS * self.sweep_s + gains_s
 
 
+#: the wall time a plan of a batch run (a campaign's) may take (s): on a loaded machine a plan that takes 20 s on a
+#: quiet one took over 120 s (an oscillating `banded` plan at load 14 stopped after 27 IPOPT iterations and ended the
+#: whole campaign); a batch run has nobody waiting for it, so only a plan that does not converge should end it
+BATCH_MAX_WALL_S = 1800.0
+
+
 @dataclass(frozen=True)
 class PlanBudget:
     """Limits and the cancel token of one planning job (module docstring)."""

@@ -180,8 +180,9 @@ def solve_feedforward(
     t_stop : float, optional
         Run time (s) at which the run ends: the horizon stops there (plus one knot interval).
     budget : PlanBudget, optional
-        Time, memory and cancellation of this job (:mod:`twin.control.budget`); its wall time also
-        caps ``max_wall_s``.
+        Time, memory and cancellation of this job (:mod:`twin.control.budget`); when given, its remaining wall
+        time is IPOPT's limit instead of ``max_wall_s`` (a server's ``plan_max_s``, a campaign's
+        :data:`twin.control.budget.BATCH_MAX_WALL_S`).
 
     Raises
     ------
@@ -216,7 +217,7 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     if budget is not None:
         budget.check("the feedforward plan")
         check_budget(pg, model, cfg, budget)
-        max_wall_s = min(max_wall_s, max(budget.remaining_s, 1e-3))
+        max_wall_s = max(budget.remaining_s, 1e-3)  # the job's own limit, not the interactive default
     horizon, substeps = pg.horizon, int(round(pg.interval / t_s))
     grid = KnotGrid(float(t0), t_s, substeps, pg.K)
     theta_lin, n_heun = np.full(model.n, pg.T_final), pg.n_heun

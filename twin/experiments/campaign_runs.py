@@ -121,6 +121,7 @@ def run_campaign_run(
     ``task.keep_series``).  In this process ``local`` is (config, radiation, truth radiation) and
     ``plan_cache`` the campaign's; on a worker they come from the worker's own caches.  A run that fails raises,
     as in the serial campaign."""
+    from twin.control.budget import BATCH_MAX_WALL_S, PlanBudget
     from twin.experiments.model_error import open_loop_model_error
     from twin.experiments.run import execute_run
     from twin.furnace.simulated import SimulatedFurnace
@@ -141,7 +142,7 @@ def run_campaign_run(
     log.info("campaign: %s, seed %d (truth %s)", task.name, task.seed, scenario.truth)
     sim = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own if scenario.truth == "independent"
                                         else None)
-    loop = ClosedLoop(cfg, scenario, rad, furnace=sim, plan_cache=plans)
+    loop = ClosedLoop(cfg, scenario, rad, furnace=sim, plan_cache=plans, budget=PlanBudget(BATCH_MAX_WALL_S))
     sinks = list(sink_factories)
     if task.ship:
         with tempfile.TemporaryDirectory(prefix="furnace-twin-campaign-") as tmp:
