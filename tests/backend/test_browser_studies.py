@@ -9,11 +9,12 @@ import json
 
 import httpx
 import pytest
-from test_browser import _open_dashboard, _wait_text
+from test_browser import _wait_text
 
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
+from conftest import open_dashboard
 
 pytestmark = pytest.mark.browser
 
@@ -34,7 +35,7 @@ def _fill(page, text: str) -> None:
 
 
 def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
-    page, errors = _open_dashboard(browser, server.url)
+    page, errors = open_dashboard(browser, server.url)
     page.click("#view-studies")
     assert page.is_hidden("main") and page.is_visible("#studies-view")
     # the example comes with the furnace's default amplitude
@@ -78,7 +79,7 @@ def test_with_a_token_figures_and_downloads_carry_it(browser, tmp_path, small_cf
 
     s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token=TOKEN)
     with ThreadedServer(create_app(s, small_cfg, study_runner=FakeStudyRunner()), free_port()) as srv:
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         page.wait_for_selector("#token-box", state="visible")
         page.fill("#token", TOKEN)
         page.dispatch_event("#token", "change")
