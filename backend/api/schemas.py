@@ -169,6 +169,9 @@ class FurnaceOut(BaseModel):
     lamps: dict[str, Any] = Field(description="lamp arrays: count, pitch, distance (m) per side")
     tc_relative: list[list[float]] = Field(description="TC1..TC4 (x / L_s, y / W_s); TC4 is the validation TC")
     tc_positions: list[list[float]] = Field(description="TC1..TC4 in m")
+    calibration_bounds: dict[str, list[float]] = Field(
+        default_factory=dict, description="calibrated parameters: [low, high] relative deviation from the model "
+                                          "that the calibrating estimator holds each within")
     groups: list[LampGroupOut] = Field(description="lamp groups, in the order of the power vector u")
     limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
                                                "{min, max, exclusive_min, unit, default}")
