@@ -113,7 +113,21 @@ export async function refreshRun(quiet = false) {
     if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
     settle(run);
     if (changed) state.dirty = true; // reference markers, windows
+    readEndEvents(run);
   } catch (e) { /* transient */ }
+}
+
+// A run that ended: its last events (the end itself) may be stored after its stream closed and after the history
+// was read; the series is read again (every refresh, at most 5 times per run) until the end is listed.
+const END = /^run (finished|stopped|interrupted|failed|lost|ended)/;
+const endReads = new Map();
+function readEndEvents(run) {
+  if (going(run) || state.loading || run.status === "queued") return;
+  if ([...state.events.values()].some((e) => e.kind === "run_ended" || END.test(e.text || ""))) return;
+  const n = endReads.get(run.id) || 0;
+  if (n >= 5) return;
+  endReads.set(run.id, n + 1);
+  api("GET", `/api/runs/${run.id}/series`).then((d) => { if (state.runId === run.id) addEvents(d.events); }).catch(() => {});
 }
 
 // Everything so far: the stored (or live) series with its events, then the frames that came meanwhile.
