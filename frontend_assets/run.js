@@ -113,21 +113,20 @@ export async function refreshRun(quiet = false) {
     if (quiet) state.lastStatus = run.status; else noteStatus(run.status, run.latest ? run.latest.t : null);
     settle(run);
     if (changed) state.dirty = true; // reference markers, windows
-    readEndEvents(run);
   } catch (e) { /* transient */ }
 }
 
 // A run that ended: its last events (the end itself) may be stored after its stream closed and after the history
-// was read; the series is read again (every refresh, at most 5 times per run) until the end is listed.
+// was read; its events are read again (every 2 s, at most 5 times) until the end is listed.
 const END = /^run (finished|stopped|interrupted|failed|lost|ended)/;
-const endReads = new Map();
-function readEndEvents(run) {
-  if (going(run) || state.loading || run.status === "queued") return;
+function readEndEvents(runId, tries = 5) {
+  if (state.runId !== runId || state.loading || tries <= 0) return;
   if ([...state.events.values()].some((e) => e.kind === "run_ended" || END.test(e.text || ""))) return;
-  const n = endReads.get(run.id) || 0;
-  if (n >= 5) return;
-  endReads.set(run.id, n + 1);
-  api("GET", `/api/runs/${run.id}/series`).then((d) => { if (state.runId === run.id) addEvents(d.events); }).catch(() => {});
+  setTimeout(async () => {
+    if (state.runId !== runId || state.loading) return;
+    try { addEvents((await api("GET", `/api/runs/${runId}/series`)).events); } catch (e) { /* the next try */ }
+    readEndEvents(runId, tries - 1);
+  }, 2000);
 }
 
 // Everything so far: the stored (or live) series with its events, then the frames that came meanwhile.
@@ -171,4 +170,5 @@ export async function selectRun(runId) {
   state.loading = false;
   for (const f of state.held.splice(0)) applyFrame(f); // only those after the history's last sample count
   state.dirty = true;
+  if (!going(run)) readEndEvents(runId);
 }
