@@ -8,7 +8,7 @@ import { describeChoice } from "./estimatorform.js";
 import { termText } from "./glossary.js";
 import { fieldLayout, tcPositions } from "./heatmap.js";
 import { windowShapes } from "./overlays.js";
-import { $, fmt } from "./page.js";
+import { $, esc, fmt } from "./page.js";
 import { addChartCard } from "./panels.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
@@ -33,10 +33,47 @@ function show(id, on) {
   return on;
 }
 
+// What the chart says, in words (issue 27 item 10): each line, the bound it sits at, and what that means.
+const pctSigned = (v) => `${v >= 0 ? "+" : "−"}${Math.abs(100 * v).toFixed(1)} %`;
+const AT_BOUND = 0.005; // within 0.5 % points of a bound: held there
+
+export function parameterWords(name, v, sigma, bounds) {
+  const word = PARAM_WORDS[name] || name;
+  const now = `${word} ${pctSigned(v)}${sigma !== null && sigma !== undefined ? ` ± ${(100 * sigma).toFixed(1)} %` : ""}`;
+  if (bounds) {
+    const [lo, hi] = bounds;
+    const side = v <= lo + AT_BOUND ? lo : v >= hi - AT_BOUND ? hi : null;
+    if (side !== null) {
+      return `${word} at its ${pctSigned(side)} bound: the twin's model cannot explain the TCs with ${word} alone ` +
+        "(the furnace differs from the model in more than this parameter); it is held at the bound";
+    }
+  }
+  if (sigma !== null && sigma !== undefined && Math.abs(v) < sigma) {
+    return `${now}: not settled, within ±1σ of the model's own value (0 %)`;
+  }
+  return `${now}: the TCs say this furnace's ${word} is ${Math.abs(100 * v).toFixed(1)} % ${v >= 0 ? "above" : "below"} the model's`;
+}
+
+function paramWordsBox() {
+  let box = $("param-words");
+  if (!box) {
+    box = document.createElement("div");
+    Object.assign(box, { id: "param-words", className: "param-words" });
+    $("card-param-plot").append(box);
+  }
+  return box;
+}
+
 function parameterFigure() {
   const s = series();
   const names = Object.keys(s.params).filter((n) => s.params[n].v.some((v) => v !== null));
   if (!show("param-plot", names.length > 0)) return null;
+  const bounds = (state.furnace && state.furnace.calibration_bounds) || {};
+  const last = (arr) => { for (let k = arr.length - 1; k >= 0; k--) if (arr[k] !== null) return arr[k]; return null; };
+  const lines = names.map((n) => `<li>${esc(parameterWords(n, last(s.params[n].v), last(s.params[n].s), bounds[n]))}</li>`);
+  const html = `<p>Each line: how far the twin's estimate of a furnace parameter has moved from the model's value (0 %), with a ±1σ band; dashed: the bounds it is held within.</p><ul>${lines.join("")}</ul>`;
+  const box = paramWordsBox();
+  if (box.dataset.html !== html) { box.innerHTML = html; box.dataset.html = html; }
   const data = [];
   for (const name of names) {
     const p = s.params[name], c = PARAM_COLORS[name] || [90, 90, 90], word = PARAM_WORDS[name] || name;
@@ -51,7 +88,16 @@ function parameterFigure() {
         hovertemplate: `${word} %{y:.2f} % ± %{customdata:.2f} % at %{x:.1f} s<extra></extra>` },
     );
   }
-  return { data, layout: baseLayout("deviation from the model (%)", {
+  const shapes = [], annotations = [];
+  for (const name of names) {
+    const c = PARAM_COLORS[name] || [90, 90, 90];
+    for (const b of bounds[name] || []) {
+      shapes.push({ type: "line", xref: "paper", x0: 0, x1: 1, y0: 100 * b, y1: 100 * b, line: { color: rgb(c, 0.8), width: 1, dash: "dash" } });
+      annotations.push({ xref: "paper", x: 1, xanchor: "right", y: 100 * b, yanchor: b < 0 ? "bottom" : "top", showarrow: false,
+        text: `${PARAM_WORDS[name] || name} bound ${pctSigned(b)}`, font: { size: 9, color: rgb(c) } });
+    }
+  }
+  return { data, layout: baseLayout("deviation from the model (%)", { shapes, annotations,
     yaxis: { title: { text: "deviation from the model (%)", standoff: 4 }, zeroline: true, zerolinecolor: "#9aa5b8" } }) };
 }
 

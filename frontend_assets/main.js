@@ -12,6 +12,7 @@ import { wireHelp } from "./glossary.js";
 import { wireHeatScale } from "./heatmap.js";
 import { applyLimits } from "./inputs.js";
 import { $, going } from "./page.js";
+import { wirePanels } from "./panels.js";
 import { refreshRun, selectRun } from "./run.js";
 import { refreshRuns, wireRunList } from "./runlist.js";
 import { emptySeries } from "./series.js";
@@ -69,6 +70,7 @@ async function retryRadiation() {
 }
 
 async function init() {
+  wirePanels();
   forgetOldToken();
   try {
     [state.health, state.furnace, state.glossary] = await Promise.all([api("GET", "/api/health"), api("GET", "/api/furnace"),

@@ -27,3 +27,17 @@ export function addChartCard(id, title, term = null, { wide = false } = {}) {
   document.getElementById("plots").append(card);
   return plot;
 }
+
+// Below 1100 px the side panels stack above the charts: the new-run form, the faults and the learnt furnace
+// start closed there (their headings stay, one click opens them), so the charts come first (issue 27 item 10);
+// wider, every panel is open.  Crossing the width sets them again; a click in between is the user's.
+export const NARROW = "(max-width: 1099px)";
+
+export function wirePanels() {
+  const narrow = window.matchMedia(NARROW);
+  const apply = () => {
+    for (const d of document.querySelectorAll("details.panel[data-narrow=closed]")) d.open = !narrow.matches;
+  };
+  apply();
+  narrow.addEventListener("change", apply);
+}

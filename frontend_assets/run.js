@@ -116,6 +116,19 @@ export async function refreshRun(quiet = false) {
   } catch (e) { /* transient */ }
 }
 
+// A run that ended: its last events (the end itself) may be stored after its stream closed and after the history
+// was read; its events are read again (every 2 s, at most 5 times) until the end is listed.
+const END = /^run (finished|stopped|interrupted|failed|lost|ended)/;
+function readEndEvents(runId, tries = 5) {
+  if (state.runId !== runId || state.loading || tries <= 0) return;
+  if ([...state.events.values()].some((e) => e.kind === "run_ended" || END.test(e.text || ""))) return;
+  setTimeout(async () => {
+    if (state.runId !== runId || state.loading) return;
+    try { addEvents((await api("GET", `/api/runs/${runId}/series`)).events); } catch (e) { /* the next try */ }
+    readEndEvents(runId, tries - 1);
+  }, 2000);
+}
+
 // Everything so far: the stored (or live) series with its events, then the frames that came meanwhile.
 async function loadHistory(runId, keep = false) {
   try {
@@ -157,4 +170,5 @@ export async function selectRun(runId) {
   state.loading = false;
   for (const f of state.held.splice(0)) applyFrame(f); // only those after the history's last sample count
   state.dirty = true;
+  if (!going(run)) readEndEvents(runId);
 }

@@ -20,12 +20,54 @@ function examples() {
   const base = { duration: 240.0, reference: { setpoint: 1100.0, t_E: 120.0 } };
   return {
     grid: { name: "period x amplitude", base: { ...base, oscillation: { enabled: true } },
-      grid: { "oscillation.period": [9.0, 18.0, 36.0], "oscillation.amplitude": [+(amp / 2).toFixed(4), amp] } },
+      grid: { "oscillation.period": [9.0, 18.0, 36.0], "oscillation.amplitude": [+(amp / 2).toFixed(4), amp], seed: [1, 2] } },
     mc: { name: "robustness to model error", base,
       monte_carlo: { n: 20, seed: 1, "mismatch.alpha": { dist: "uniform", low: -0.3, high: 0.3 },
         "mismatch.emissivity": { dist: "normal", mean: 0.0, std: 0.03, low: -0.1, high: 0.1 },
         tc_noise: { dist: "uniform", low: 0.5, high: 2.0 } } },
   };
+}
+
+// The study as a person reads it (under the examples; the JSON is the advanced box), and before Start what it
+// would run: cases (design points x seeds) and an estimated time (POST /api/studies/plan), both on every edit.
+function readable(doc) {
+  const base = doc.base || {};
+  const ref = base.reference || {};
+  const head = `${esc(doc.name || "unnamed study")}: ${ref.setpoint ? `${num(ref.setpoint)} K` : "the default reference"}` +
+    `${ref.t_E ? ` in ${num(ref.t_E)} s` : ""}, ${base.duration ? `${num(base.duration)} s` : "default duration"} per case`;
+  return `<b>${head}</b>${varied({ ...doc, monte_carlo: doc.monte_carlo ? { seeds: "per_sample", ...doc.monte_carlo } : null })}`;
+}
+
+function duration(s) {
+  if (s < 90) return `${Math.round(s)} s`;
+  if (s < 5400) return `${Math.round(s / 60)} min`;
+  return `${(s / 3600).toFixed(1)} h`;
+}
+
+let planSeq = 0;
+async function refreshPlan() {
+  const seq = ++planSeq;
+  let doc;
+  try { doc = JSON.parse($("study-text").value); } catch (e) {
+    $("study-read").innerHTML = `<span class="err">the study is not valid JSON: ${esc(e.message)}</span>`;
+    $("study-plan").textContent = "";
+    return;
+  }
+  $("study-read").innerHTML = readable(doc);
+  try {
+    const p = await api("POST", "/api/studies/plan", doc);
+    if (seq !== planSeq) return;
+    const cases = `${p.cases} cases (${p.points} design point${p.points === 1 ? "" : "s"} x ${p.per_point} seed${p.per_point === 1 ? "" : "s"} or samples) on ${p.workers} workers`;
+    const time = p.estimate_s === null ? "no time estimate yet" : `estimated ${duration(p.estimate_s)} (an estimate)`;
+    $("study-plan").innerHTML = `<b>Start runs ${cases}; ${time}</b><span class="muted">${esc(p.basis || "")}</span>`;
+  } catch (e) {
+    if (seq === planSeq) $("study-plan").innerHTML = `<span class="err">${esc(e.message)}</span>`;
+  }
+}
+
+function setText(doc) {
+  $("study-text").value = JSON.stringify(doc, null, 2);
+  refreshPlan();
 }
 
 function showView(which) {
@@ -34,7 +76,7 @@ function showView(which) {
   $("studies-view").hidden = !studies;
   $("view-runs").classList.toggle("on", !studies);
   $("view-studies").classList.toggle("on", studies);
-  if (studies && !view.edited) $("study-text").value = JSON.stringify(examples().grid, null, 2); // the furnace is known now
+  if (studies && !view.edited) setText(examples().grid); // the furnace is known now
   if (studies) { refreshStudies(); if (!view.timer) view.timer = setInterval(tick, 2000); }
   else if (view.timer) { clearInterval(view.timer); view.timer = null; }
 }
@@ -127,8 +169,10 @@ function renderStudy(s) {
   const downloads = Object.entries(s.downloads).map(([n, u]) => `<a href="${u}" data-url="${u}" download="${esc(s.id)}-${esc(n)}">${esc(n)}</a>`).join(" · ");
   // metrics by their names in the glossary (the dashboard's words), the code key on hover (issue 27 item 8)
   const metric = (k) => `<span title="${esc(k)}">${esc(metricName(k))}</span> ${helpMark(k)}`;
-  const best = (s.best || []).map((b) => `<tr><td>${metric(b.metric)}</td><td class="num">${pct(b.value)} %</td>
-      <td>${params(b.params)}${b.key ? "" : ` <span class="muted">(median of ${b.n})</span>`}</td></tr>`).join("");
+  // a best case only beyond the seed-to-seed spread; the range is the one colour scale of the metric's maps
+  const best = (s.best || []).map((b) => `<tr><td>${metric(b.metric)}</td>
+      <td class="num">${pct(b.min)} – ${pct(b.max)} %</td><td class="num">${b.spread === null ? "unknown" : `${pct(b.spread)} %`}</td>
+      <td class="reading ${b.decided ? "decided" : ""}">${esc(b.reading)}</td></tr>`).join("");
   const pcts = Object.entries(s.percentiles || {}).map(([m, p]) => `<tr><td>${metric(m)}</td>${["p5", "p50", "p95", "max"]
     .map((q) => `<td class="num">${pct(p[q])}</td>`).join("")}</tr>`).join("");
   const failed = (s.cases || []).filter((c) => c.status === "failed");
@@ -147,7 +191,7 @@ function renderStudy(s) {
     ${varied(s.study)}
     ${downloads ? `<div class="downloads">Downloads: ${downloads}</div>` : ""}
     <div class="study-tables">
-      ${best ? `<div><h3>Best case per metric</h3><table class="study-table"><thead><tr><th>metric</th><th>best %</th><th>where</th></tr></thead><tbody>${best}</tbody></table></div>` : ""}
+      ${best ? `<div><h3>Best case per metric</h3><p class="muted">Design points ranked by their median over the seeds; a best case is named only where it beats the next by more than the seed-to-seed spread (median over the points of max − min over their seeds). The maps of a metric share one colour scale over its range.</p><table class="study-table"><thead><tr><th>metric</th><th>range of the points</th><th>seed spread</th><th>reading</th></tr></thead><tbody>${best}</tbody></table></div>` : ""}
       ${pcts ? `<div><h3>Percentiles over the samples (%)</h3><table class="study-table"><thead><tr><th>metric</th><th>p5</th><th>p50</th><th>p95</th><th>max</th></tr></thead><tbody>${pcts}</tbody></table></div>` : ""}
     </div>
     ${failed.length ? `<h3>Failed cases</h3><ul class="failed">${failed.map((c) => `<li>${params(c.params)}: <span class="err">${esc(c.error)}</span></li>`).join("")}</ul>` : ""}
@@ -187,10 +231,15 @@ export function initStudies() {
   $("view-runs").addEventListener("click", () => showView("runs"));
   $("view-studies").addEventListener("click", () => showView("studies"));
   $("study-form").addEventListener("submit", submitStudy);
-  const example = (which) => () => { $("study-text").value = JSON.stringify(examples()[which], null, 2); view.edited = false; };
+  const example = (which) => () => { setText(examples()[which]); view.edited = false; };
   $("study-example-grid").addEventListener("click", example("grid"));
   $("study-example-mc").addEventListener("click", example("mc"));
-  $("study-text").addEventListener("input", () => { view.edited = true; });
+  let timer = null;
+  $("study-text").addEventListener("input", () => {
+    view.edited = true;
+    clearTimeout(timer);
+    timer = setTimeout(refreshPlan, 300);
+  });
   document.querySelector("#study-list tbody").addEventListener("click", (ev) => {
     const tr = ev.target.closest("tr");
     if (tr && tr.dataset.id) selectStudy(tr.dataset.id);

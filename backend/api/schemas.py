@@ -169,6 +169,9 @@ class FurnaceOut(BaseModel):
     lamps: dict[str, Any] = Field(description="lamp arrays: count, pitch, distance (m) per side")
     tc_relative: list[list[float]] = Field(description="TC1..TC4 (x / L_s, y / W_s); TC4 is the validation TC")
     tc_positions: list[list[float]] = Field(description="TC1..TC4 in m")
+    calibration_bounds: dict[str, list[float]] = Field(
+        default_factory=dict, description="calibrated parameters: [low, high] relative deviation from the model "
+                                          "that the calibrating estimator holds each within")
     groups: list[LampGroupOut] = Field(description="lamp groups, in the order of the power vector u")
     limits: dict[str, Any] = Field(description="every scenario limit and default, in the shape of a scenario: "
                                                "{min, max, exclusive_min, unit, default}")
@@ -200,11 +203,24 @@ class StudySummary(BaseModel):
     links: StudyLinks
 
 
+class StudyPlan(BaseModel):
+    cases: int = Field(description="cases a start would run: design points x seeds or Monte Carlo samples")
+    points: int = Field(description="design points (the grid without its seed field)")
+    per_point: int = Field(description="cases per design point (seeds x samples)")
+    workers: int = Field(description="Dask workers the server's studies get")
+    estimate_s: float | None = Field(description="estimated wall time (s), from this server's finished studies; "
+                                                 "null before any")
+    basis: str | None = Field(description="what the estimate is scaled from, or why there is none")
+
+
 class StudyDetail(StudySummary):
     study: dict[str, Any] = Field(description="the study document as posted")
     cases: list[dict[str, Any]] | None = Field(
         None, description="per case: key, index, params, status, metrics, error (when the study has ended)")
-    best: list[dict[str, Any]] = Field(default_factory=list, description="best case (or grid point) per metric")
+    best: list[dict[str, Any]] = Field(
+        default_factory=list,
+        description="per metric: the design points' range (min, max), the seed-to-seed spread, the best point and "
+                    "the next, whether the best beats the next by more than the spread (decided), the reading")
     percentiles: dict[str, dict[str, float]] | None = Field(None, description="Monte Carlo: per metric")
     timing: dict[str, Any] | None = None
     figures: list[str] = Field(default_factory=list, description="URLs of the PNG figures")

@@ -125,6 +125,49 @@ class StudyManager:
                                 f"server's limit of {s.max_duration_s:g} s")
         return name, cfg, cases
 
+    def plan(self, spec: StudySpec) -> dict[str, Any]:
+        """Before a start: the study's cases (design points x seeds / samples) and its estimated wall time.
+
+        The estimate scales the per-case wall time of this server's finished studies (their ``timing``:
+        median case time per simulated second, and the first case's radiation-table load) to this study's
+        simulated seconds on the workers it will get; None, with the reason, when no study has finished here."""
+        from twin.studies.cluster import default_workers
+        from twin.studies.report import design_fields
+
+        _name, _cfg, cases = self.validate(spec)
+        points = {json.dumps({p: c.params.get(p) for p in design_fields(spec)}, sort_keys=True) for c in cases}
+        workers = self.settings.study_workers or default_workers()
+        out: dict[str, Any] = {"cases": len(cases), "points": len(points), "per_point": len(cases) // len(points),
+                               "workers": workers, "estimate_s": None, "basis": None}
+        rate, load, basis = self._seconds_per_simulated_second()
+        if rate is None:
+            out["basis"] = "no study has finished on this server yet: no per-case time to go by"
+            return out
+        waves = -(-len(cases) // workers)
+        mean_duration = sum(c.scenario.duration for c in cases) / len(cases)
+        out["estimate_s"] = (load or 0.0) + waves * mean_duration * rate
+        out["basis"] = basis
+        return out
+
+    def _seconds_per_simulated_second(self) -> tuple[float | None, float | None, str | None]:
+        """Wall s per simulated s of a case, from the newest finished study of this server that has timings."""
+        for state in self.all():
+            if state.status != "finished":
+                continue
+            timing = (self.summary(state.id) or {}).get("timing") or {}
+            if not timing.get("case_s"):
+                continue
+            try:
+                _n, _c, old = self.validate(StudySpec.model_validate(self.request(state.id)))
+            except (StudyRejected, OSError, ValueError):
+                continue
+            duration = sum(c.scenario.duration for c in old) / len(old)
+            rate = float(timing["case_s"]) / duration
+            return rate, timing.get("load_s"), (f"study {state.name or state.id}: {timing['case_s']:.1f} s per "
+                                                f"{duration:g} s case (median), {timing.get('load_s') or 0:.0f} s "
+                                                "first load")
+        return None, None, None
+
     def submit(self, spec: StudySpec) -> StudyState:
         name, _cfg, cases = self.validate(spec)
         study_id = uuid.uuid4().hex[:12]

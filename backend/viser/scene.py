@@ -92,6 +92,54 @@ def lamp_colors(cfg: FurnaceConfig, u: np.ndarray) -> np.ndarray:
     return (LAMP_OFF + frac[:, None] * (LAMP_ON - LAMP_OFF)).astype(np.uint8)
 
 
+#: group labels two blocks apart share an end of the lamps: every other pair of them sits this much further out (m)
+LABEL_STAGGER = 0.03
+
+
+def group_label_places(cfg: FurnaceConfig, boxes: dict[str, tuple[np.ndarray, np.ndarray]]
+                       ) -> list[tuple[str, str, tuple[float, float, float], Anchor]]:
+    """Where each lamp group's name goes: once per block of neighbouring lamps of a group, at an end of the
+    lamps (horizontal lamps: top or bottom, vertical lamps: left or right).  The blocks alternate ends in their
+    order along the array, so neighbours are at opposite ends, and the labels two blocks apart (the same end)
+    are staggered by :data:`LABEL_STAGGER`: groups alternating by group number put T1h and T3h side by side
+    ("T3hT1h").  ``boxes``: each lamp mesh's (min, max) corner.  Returns (node, text, position, anchor)."""
+    blocks: dict[str, list[tuple[np.ndarray, np.ndarray, str, int]]] = {"h": [], "v": []}
+    for g in cfg.lamps.groups:
+        numbers: dict[str, list[int]] = {}
+        for lamp in g.lamps:
+            side, k = lamp[0], int(lamp[1:])
+            count = cfg.lamps.horizontal.count if side == "h" else cfg.lamps.vertical.count
+            numbers.setdefault(side, []).append(k if k > 0 else count + 1 + k)
+        for side, ks in numbers.items():
+            runs: list[list[int]] = []
+            for k in sorted(ks):  # neighbouring lamps form one block, labelled once
+                if runs and k == runs[-1][-1] + 1:
+                    runs[-1].append(k)
+                else:
+                    runs.append([k])
+            for bi, run in enumerate(runs):
+                lo = np.min([boxes[f"{side}{k}"][0] for k in run], axis=0)
+                hi = np.max([boxes[f"{side}{k}"][1] for k in run], axis=0)
+                blocks[side].append((lo, hi, g.name, bi))
+    out: list[tuple[str, str, tuple[float, float, float], Anchor]] = []
+    for side, found in blocks.items():
+        across = 0 if side == "h" else 1  # horizontal lamps lie along y, side by side in x; vertical ones along x
+        found.sort(key=lambda b: float(b[0][across] + b[1][across]))
+        for rank, (lo, hi, name, bi) in enumerate(found):
+            first, out_by = rank % 2 == 0, LABEL_STAGGER * ((rank // 2) % 2)
+            anchor: Anchor
+            if side == "h":  # at the top (+y) or bottom end
+                pos = (0.5 * float(lo[0] + hi[0]), float(hi[1]) + out_by if first else float(lo[1]) - out_by,
+                       float(hi[2]))
+                anchor = "bottom-center" if first else "top-center"
+            else:  # at the left or right end
+                pos = (float(lo[0]) - out_by if first else float(hi[0]) + out_by, 0.5 * float(lo[1] + hi[1]),
+                       float(lo[2]))
+                anchor = "center-right" if first else "center-left"
+            out.append((f"/labels/groups/{name}-{side}{bi}", name, pos, anchor))
+    return out
+
+
 class FurnaceScene:
     """The scene's handles; :meth:`show` redraws only what a snapshot changed."""
 
@@ -147,37 +195,12 @@ class FurnaceScene:
                                                anchor="bottom-left" if k == 1 else "top-left"))
 
     def _add_labels(self, meshes: list[tuple[str, str, np.ndarray, np.ndarray]]) -> None:
-        """Names on the scene: each lamp group once per block of neighbouring lamps (horizontal lamps at their
-        top or bottom end, vertical lamps at their left or right end, alternating by group so that neighbours do
-        not cover each other), the reflectors, the holders and the window."""
+        """Names on the scene: each lamp group once per block of neighbouring lamps (:func:`group_label_places`),
+        the reflectors, the holders and the window."""
         sc = self.server.scene
         boxes = {name: (verts.min(axis=0), verts.max(axis=0)) for name, _, verts, _ in meshes}
-        for gi, g in enumerate(self.cfg.lamps.groups):
-            numbers: dict[str, list[int]] = {}
-            for lamp in g.lamps:
-                side, k = lamp[0], int(lamp[1:])
-                count = self.cfg.lamps.horizontal.count if side == "h" else self.cfg.lamps.vertical.count
-                numbers.setdefault(side, []).append(k if k > 0 else count + 1 + k)
-            for side, ks in numbers.items():
-                blocks: list[list[int]] = []
-                for k in sorted(ks):  # neighbouring lamps form one block, labelled once
-                    if blocks and k == blocks[-1][-1] + 1:
-                        blocks[-1].append(k)
-                    else:
-                        blocks.append([k])
-                for bi, block in enumerate(blocks):
-                    lo = np.min([boxes[f"{side}{k}"][0] for k in block], axis=0)
-                    hi = np.max([boxes[f"{side}{k}"][1] for k in block], axis=0)
-                    first = gi % 2 == 0
-                    anchor: Anchor
-                    if side == "h":  # axis along y: at the top (+y) or bottom end
-                        pos = (0.5 * (lo[0] + hi[0]), hi[1] if first else lo[1], hi[2])
-                        anchor = "bottom-center" if first else "top-center"
-                    else:  # axis along x: at the left or right end
-                        pos = (lo[0] if first else hi[0], 0.5 * (lo[1] + hi[1]), lo[2])
-                        anchor = "center-right" if first else "center-left"
-                    node = f"/labels/groups/{g.name}-{side}{bi}"
-                    self.labels[node] = sc.add_label(node, g.name, position=pos, anchor=anchor)
+        for node, text, pos, anchor in group_label_places(self.cfg, boxes):
+            self.labels[node] = sc.add_label(node, text, position=pos, anchor=anchor)
         words = {"reflector_h": "gold reflector (horizontal lamps)", "reflector_v": "gold reflector (vertical lamps)",
                  "holder_upper": "upper holder (x = 0)", "holder_lower": "lower holder", "window": "quartz window"}
         for name, text in words.items():

@@ -222,6 +222,21 @@ def browser():
         b.close()
 
 
+def open_dashboard(browser: Any, url: str, width: int = 1280, height: int = 800) -> tuple[Any, list[str]]:
+    """A new page on the dashboard at ``url``, once its header says the server is ok, and the list its console
+    errors and page errors go to."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    errors: list[str] = []
+    # a refused request (401 / 422) is logged by chromium as a failed resource: expected here
+    page.on("console", lambda m: errors.append(m.text)
+            if m.type == "error" and "Failed to load resource" not in m.text else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url, timeout=120_000)  # plotly.js is 4.6 MB: slow to load on a loaded machine
+    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
+                           timeout=120_000)
+    return page, errors
+
+
 def wait_model_ready(c: Any, timeout: float = 300.0) -> None:
     """Until ``GET /api/health`` says the radiation models are ready: a POST before that is queued and checked
     later (test_warm_up.py), so a test of what POST itself refuses waits for them."""

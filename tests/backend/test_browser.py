@@ -16,7 +16,7 @@ import pytest
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
-from conftest import FakeFactory, fake_factory
+from conftest import FakeFactory, fake_factory, open_dashboard
 
 pytestmark = pytest.mark.browser
 
@@ -39,19 +39,6 @@ def _text(page, selector: str) -> str:
     return page.inner_text(selector)
 
 
-def _open_dashboard(browser, url: str, width: int = 1280, height: int = 800):
-    page = browser.new_page(viewport={"width": width, "height": height})
-    errors: list[str] = []
-    # a refused request (401 / 422) is logged by chromium as a failed resource: expected here
-    page.on("console", lambda m: errors.append(m.text)
-            if m.type == "error" and "Failed to load resource" not in m.text else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url, timeout=120_000)  # plotly.js is 4.6 MB: slow to load on a loaded machine
-    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
-                           timeout=120_000)
-    return page, errors
-
-
 def _wait_text(page, selector: str, needle: str, timeout: float = 90_000) -> None:
     """Wait until the element's text contains ``needle``; on timeout say what it showed."""
     try:
@@ -66,7 +53,7 @@ def _events(page) -> list[str]:
 
 
 def test_dashboard_points_run_with_live_changes(server, browser, artifacts, small_cfg) -> None:
-    page, errors = _open_dashboard(browser, server.url)
+    page, errors = open_dashboard(browser, server.url)
     n_runs = len(httpx.get(f"{server.url}/api/runs", timeout=10).json())
     page.check("input[name=refmode][value=points]")
     assert page.is_visible("textarea[name=points]") and not page.is_visible("input[name=setpoint]")
@@ -170,7 +157,7 @@ def test_viser_follows_a_run_then_stop_from_dashboard(server, browser, artifacts
     page.wait_for_selector(f"text={run_id}", timeout=60_000)  # the status names the followed run
     time.sleep(2.0)  # a few scene updates of the running run
 
-    dash, errors = _open_dashboard(browser, server.url)
+    dash, errors = open_dashboard(browser, server.url)
     dash.wait_for_selector(f"#run-pick option[value='{run_id}']", state="attached", timeout=30_000)
     dash.select_option("#run-pick", run_id)
     dash.wait_for_function("document.getElementById('run-badge').textContent === 'running'", timeout=60_000)
@@ -204,7 +191,7 @@ def test_dashboard_asks_for_the_token(browser, tmp_path, small_cfg, artifacts) -
     message that says where to enter it; the token is kept for the tab only (never in the URL)."""
     s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token="s3cret-token-0123456")
     with ThreadedServer(create_app(s, small_cfg, loop_factory=fake_factory()), free_port()) as srv:
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         page.wait_for_selector("#token-box", state="visible")
         page.fill("input[name=duration]", "600")
         page.fill("input[name=speed]", "1")
@@ -244,7 +231,7 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
     s = Settings(data_dir=tmp_path / "data", viser_port=0, max_duration_s=900.0, change_timeout_s=120.0)
     app = create_app(s, cfg, loop_factory=fake_factory(), furnace_name=furnace_name(cfg, path))
     with ThreadedServer(app, free_port()) as srv:
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         bounds = _js(page, "['amplitude', 'duration'].map((n) => { const e = document.querySelector("
                            "`#start-form [name=${n}]`); return [e.min, e.max, e.value]; })")
         assert bounds == [["0", "0.03", "0.03"], ["0", "900", "240"]]  # duration: above 0 (data-open)
@@ -286,7 +273,7 @@ def test_inputs_come_from_the_furnace(browser, tmp_path, artifacts) -> None:
 def test_dashboard_starts_an_opcua_run_only_where_allowed(server, browser, artifacts) -> None:
     """The form's furnace choice: OPC UA shows the endpoint and hides what only a simulation has (speed,
     noise, seed, deviations); an endpoint the server may not, or cannot, reach is refused on the message line."""
-    page, errors = _open_dashboard(browser, server.url)
+    page, errors = open_dashboard(browser, server.url)
     n_runs = len(httpx.get(f"{server.url}/api/runs", timeout=10).json())
     assert not page.is_visible("input[name=endpoint]") and page.is_visible("input[name=speed]")
     page.check("input[name=plant][value=opcua]")
@@ -331,7 +318,7 @@ def test_reload_shows_the_whole_history_and_every_tab_the_same_events(browser, t
                                                                       artifacts) -> None:
     with _fake_server(tmp_path, small_cfg) as srv:
         run_id = httpx.post(f"{srv.url}/api/runs", json={**LIVE_RUN, "speed": 2.0}, timeout=30).json()["id"]
-        first, errors = _open_dashboard(browser, srv.url)  # shows the newest running run
+        first, errors = open_dashboard(browser, srv.url)  # shows the newest running run
         first.wait_for_function("state.runId !== null && state.series.t.length > 5", timeout=60_000)
         deadline = time.monotonic() + 60
         # the run's `latest` is stored at its first flush: null until then, while the page streams already
@@ -344,7 +331,7 @@ def test_reload_shows_the_whole_history_and_every_tab_the_same_events(browser, t
         first.wait_for_function("state.series.t.slice(-1)[0] > 8", timeout=60_000)
         # a second tab, and the first one reloaded: each shows the run from its first sample on
         t_before = httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()["latest"]["t"]
-        second, errors2 = _open_dashboard(browser, srv.url)
+        second, errors2 = open_dashboard(browser, srv.url)
         first.reload()
         first.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')")
         for page in (first, second):
@@ -386,7 +373,7 @@ def test_comparison_label_and_delete(browser, tmp_path, small_cfg, artifacts) ->
             while httpx.get(f"{srv.url}/api/runs/{run_id}", timeout=10).json()["status"] != "finished":
                 assert time.monotonic() < wait
                 time.sleep(0.1)
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         page.click(".tab[data-view=runs]")
         page.wait_for_selector(f"#history tr[data-id='{ids[1]}']")
         # the list: start time, reference, oscillation, status and errors per run
@@ -436,7 +423,7 @@ def test_double_click_on_start_starts_one_run(browser, tmp_path, small_cfg) -> N
             super().check_reference(cfg, ref)
 
     with _fake_server(tmp_path, small_cfg, SlowCheck()) as srv:
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         page.fill("input[name=duration]", "600")
         page.fill("input[name=speed]", "1")
         page.dblclick("#start-btn")  # the second click lands on the disabled button

@@ -9,11 +9,11 @@ from __future__ import annotations
 import httpx
 import numpy as np
 import pytest
-from test_browser import _open_dashboard
 
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
+from conftest import open_dashboard
 
 pytestmark = pytest.mark.browser
 
@@ -71,7 +71,7 @@ def _wait_done(url: str, run_id: str, timeout: float = 300.0) -> dict:
 
 
 def test_a_shadow_run_from_the_form_shows_the_three_estimator_cards(server, browser, artifacts, small_cfg) -> None:
-    page, errors = _open_dashboard(browser, server.url, WIDTH, HEIGHT)
+    page, errors = open_dashboard(browser, server.url, WIDTH, HEIGHT)
     # before any run: no estimator card; the form preselects the server's default estimator (GET /api/furnace)
     assert _shown(page) == dict.fromkeys(CARDS, False)
     default = httpx.get(f"{server.url}/api/furnace", timeout=10).json()["defaults"]["estimator"]
@@ -174,7 +174,7 @@ def test_a_run_without_calibration_or_shadow_shows_none_of_them(server, browser,
     r = httpx.post(f"{server.url}/api/runs", json=body, timeout=120)
     assert r.status_code == 201, r.text
     assert _wait_done(server.url, r.json()["id"])["status"] == "finished"
-    page, errors = _open_dashboard(browser, server.url, WIDTH, HEIGHT)
+    page, errors = open_dashboard(browser, server.url, WIDTH, HEIGHT)
     _drawn(page, r.json()["id"])
     assert _shown(page) == dict.fromkeys(CARDS, True)
     # the paper's estimator without a shadow, from the form: the cards go with the run they belonged to

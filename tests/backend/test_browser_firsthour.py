@@ -2,13 +2,12 @@
 
 A page samples what it shows every 50 ms (run id and status, whether the heat map has values, the clock, whether
 the live-change buttons are enabled), so the test sees the moments between a start and the first frame, and a
-run's end, that a screenshot would miss.  Screenshots go to /work/coord/screens/ (when it exists) and
+run's end, that a screenshot would miss.  Screenshots go to
 test-artifacts/.
 """
 
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 
@@ -18,10 +17,10 @@ import pytest
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
+from conftest import open_dashboard, wait_model_ready
 
 pytestmark = pytest.mark.browser
 
-SCREENS = Path("/work/coord/screens")
 
 #: every 50 ms: what the page shows of the selected run (window.seen, newest last)
 WATCH = """
@@ -40,30 +39,14 @@ setInterval(() => {
 def server(tmp_path_factory, small_cfg):
     s = Settings(data_dir=tmp_path_factory.mktemp("firsthour"), change_timeout_s=120.0)
     with ThreadedServer(create_app(s, small_cfg), free_port()) as srv:
-        end = time.monotonic() + 300
-        while httpx.get(f"{srv.url}/api/health", timeout=10).json()["radiation"] != "ready":
-            assert time.monotonic() < end, "the radiation model never became ready"
-            time.sleep(0.2)
+        with httpx.Client(base_url=srv.url, timeout=10) as c:
+            wait_model_ready(c)
         yield srv
 
 
 def _screenshot(page, artifacts: Path, name: str) -> None:
     path = artifacts / name
     page.screenshot(path=str(path), timeout=120_000)
-    if SCREENS.is_dir():
-        shutil.copy(path, SCREENS / name)
-
-
-def _open(browser, url: str):
-    page = browser.new_page(viewport={"width": 1400, "height": 900})
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text)
-            if m.type == "error" and "Failed to load resource" not in m.text else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url, timeout=120_000)
-    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
-                           timeout=120_000)
-    return page, errors
 
 
 def _start(page, setpoint: float, t_E: float, duration: float, speed: str) -> str:
@@ -79,7 +62,7 @@ def _start(page, setpoint: float, t_E: float, duration: float, speed: str) -> st
 
 
 def test_a_new_run_starts_empty_and_takes_changes_once_it_runs(server, browser, artifacts) -> None:
-    page, errors = _open(browser, server.url)
+    page, errors = open_dashboard(browser, server.url, 1400, 900)
     page.evaluate(WATCH)
     # a first run, at speed max: its charts must not blank when it ends
     first = _start(page, 700.0, 20.0, 30.0, "max")
@@ -141,7 +124,7 @@ def test_the_events_tell_what_happened_with_a_severity_filter(server, browser, a
     """A heat-up with a live reference change: the list reads as what happened (start, change, end first; lamp
     groups only for a spell that mattered, in plain words); the filter narrows it; the report lists every
     change and warning."""
-    page, errors = _open(browser, server.url)
+    page, errors = open_dashboard(browser, server.url, 1400, 900)
     run_id = _start(page, 800.0, 20.0, 120.0, "2")
     page.wait_for_function("state.run && state.run.status === 'running' && !document.getElementById('ref-btn')"
                            ".disabled", timeout=180_000)
@@ -152,10 +135,14 @@ def test_the_events_tell_what_happened_with_a_severity_filter(server, browser, a
     page.wait_for_function("document.getElementById('ctl-msg').textContent.includes('applied at t =')",
                            timeout=120_000)
     page.wait_for_function("state.run && state.run.status === 'finished' && !state.loading", timeout=240_000)
-    page.wait_for_timeout(1500)
+    # the end is stored after the stream closed (and maybe after the page read the history): it must still show
+    page.wait_for_function("(document.querySelector('#event-log li') || {}).textContent.endsWith('run finished')",
+                           timeout=30_000)
+    page.wait_for_timeout(500)
     texts = page.evaluate("[...document.querySelectorAll('#event-log li:not(.empty)')].map((li) => li.textContent)")
     every = httpx.get(f"{server.url}/api/runs/{run_id}/series", timeout=30).json()["events"]
-    assert len(texts) == len(every) > 2
+    missing = [e for e in every if not any(t.endswith(e["text"]) for t in texts)]
+    assert len(texts) == len(every) > 2, f"the page lacks {missing}"
     assert texts[-1].endswith(every[0]["text"]) and every[0]["kind"] == "run_started"
     assert every[-1]["kind"] == "run_ended" and every[-1]["text"] == "run finished"
     assert not [e for e in every if "no headroom left to cool" in e["text"] or "off (0 %)" in e["text"]]
@@ -179,7 +166,5 @@ def test_the_events_tell_what_happened_with_a_severity_filter(server, browser, a
     report = httpx.get(f"{server.url}/api/runs/{run_id}/report.png", timeout=120)
     assert report.status_code == 200
     (artifacts / "firsthour-report.png").write_bytes(report.content)
-    if SCREENS.is_dir():
-        (SCREENS / "firsthour-report.png").write_bytes(report.content)
     assert not errors, errors
     page.close()

@@ -8,12 +8,14 @@ from __future__ import annotations
 import json
 
 import httpx
+import numpy as np
 import pytest
-from test_browser import _open_dashboard, _wait_text
+from test_browser import _wait_text
 
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
+from conftest import open_dashboard
 
 pytestmark = pytest.mark.browser
 
@@ -30,16 +32,34 @@ def server(tmp_path_factory, small_cfg, radiation_cache):
 
 
 def _fill(page, text: str) -> None:
+    """The JSON is the advanced box (issue 27 item 8): opened to edit."""
+    if not page.evaluate("document.getElementById('study-advanced').open"):
+        page.click("#study-advanced summary")
     page.fill("#study-text", text)
 
 
+def _reading(cases: list[dict], metric: str) -> tuple[bool, float | None]:
+    """From the study's own case rows, independently of twin.studies.report: whether the best tc_noise point
+    (median over its seeds) beats the next by more than the seed spread (median over the points of max - min)."""
+    points: dict[float, list[float]] = {}
+    for c in cases:
+        points.setdefault(c["params"]["tc_noise"], []).append(c["metrics"][metric])
+    medians = sorted(float(np.median(v)) for v in points.values())
+    spread = float(np.median([max(v) - min(v) for v in points.values()]))
+    return medians[1] - medians[0] > spread, spread
+
+
 def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
-    page, errors = _open_dashboard(browser, server.url)
+    page, errors = open_dashboard(browser, server.url)
     page.click("#view-studies")
     assert page.is_hidden("main") and page.is_visible("#studies-view")
-    # the example comes with the furnace's default amplitude
+    # the example comes with the furnace's default amplitude; the JSON box is closed, the study reads in words
+    assert not page.is_visible("#study-text")
     example = json.loads(page.input_value("#study-text"))
     assert example["grid"]["oscillation.amplitude"][-1] == pytest.approx(0.048)
+    _wait_text(page, "#study-read", "oscillation.period")
+    # before Start: the cases (6 periods x amplitudes, 2 seeds each) and, with no study finished here, no estimate
+    _wait_text(page, "#study-plan", "12 cases (6 design points x 2 seeds or samples) on 2 workers; no time estimate")
 
     _fill(page, "{not json")
     page.click("#study-form button[type=submit]")
@@ -51,6 +71,7 @@ def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
     assert httpx.get(f"{server.url}/api/studies").json() == []
 
     _fill(page, json.dumps(STUDY))
+    _wait_text(page, "#study-plan", "4 cases (2 design points x 2 seeds or samples)")
     page.click("#study-form button[type=submit]")
     _wait_text(page, "#study-msg", "4 cases")
     _wait_text(page, "#study-list", "browser study")
@@ -67,7 +88,16 @@ def test_a_study_from_the_studies_view(browser, server, artifacts) -> None:
     csv = httpx.get(server.url + page.get_attribute("#study-detail .downloads a[href$='results.csv']", "href"))
     assert csv.status_code == 200 and len(csv.text.strip().splitlines()) == 5
     assert page.is_disabled("#study-stop") and page.is_disabled("#study-resume")
-    page.screenshot(path=str(artifacts / "studies-view.png"))
+    # the best case only beyond the seed spread, checked against the cases' own numbers
+    body = httpx.get(f"{server.url}/api/studies/{page.evaluate('window.studies.id')}").json()
+    row = page.inner_text("#study-detail tr:has(span[title='inhomogeneity_steady'])")
+    decided, spread = _reading(body["cases"], "inhomogeneity_steady")
+    assert f"{100 * spread:.2f} %" in row, row
+    assert (row.split("\t")[-1].startswith("best") if decided else "no case is better than the seed spread" in row), row
+    # a study has finished on this server now: the next plan gives an estimated time
+    _fill(page, json.dumps(STUDY))
+    _wait_text(page, "#study-plan", "(an estimate)")
+    page.screenshot(path=str(artifacts / "studies-view.png"), full_page=True)
     assert errors == []
 
 
@@ -78,7 +108,7 @@ def test_with_a_token_figures_and_downloads_carry_it(browser, tmp_path, small_cf
 
     s = Settings(data_dir=tmp_path / "data", viser_port=0, api_token=TOKEN)
     with ThreadedServer(create_app(s, small_cfg, study_runner=FakeStudyRunner()), free_port()) as srv:
-        page, errors = _open_dashboard(browser, srv.url)
+        page, errors = open_dashboard(browser, srv.url)
         page.wait_for_selector("#token-box", state="visible")
         page.fill("#token", TOKEN)
         page.dispatch_event("#token", "change")

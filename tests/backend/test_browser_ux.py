@@ -3,13 +3,11 @@ live reads as what happened (runs table, Show list, report); the form takes a de
 once it is fixed; a start says queued / running, never "started"; the comparison names runs by their labels,
 shades the windows, has a difference column and reads true against estimated.
 
-Screenshots go to /work/coord/screens/ (when it exists) and test-artifacts/.
+Screenshots go to test-artifacts/.
 """
 
 from __future__ import annotations
 
-import shutil
-import time
 from pathlib import Path
 
 import httpx
@@ -18,10 +16,10 @@ import pytest
 from backend.app import create_app
 from backend.core.settings import Settings
 from backend.core.threaded_server import ThreadedServer, free_port
+from conftest import open_dashboard, wait_model_ready
 
 pytestmark = pytest.mark.browser
 
-SCREENS = Path("/work/coord/screens")
 
 #: every 100 ms: the start message line (window.startMsgs, distinct texts in order)
 WATCH_START = """
@@ -37,10 +35,8 @@ setInterval(() => {
 def server(tmp_path_factory, small_cfg):
     s = Settings(data_dir=tmp_path_factory.mktemp("ux"), change_timeout_s=120.0)
     with ThreadedServer(create_app(s, small_cfg), free_port()) as srv:
-        end = time.monotonic() + 300
-        while httpx.get(f"{srv.url}/api/health", timeout=10).json()["radiation"] != "ready":
-            assert time.monotonic() < end, "the radiation model never became ready"
-            time.sleep(0.2)
+        with httpx.Client(base_url=srv.url, timeout=10) as c:
+            wait_model_ready(c)
         yield srv
 
 
@@ -51,20 +47,6 @@ def _save(artifacts: Path, name: str, data: bytes | None = None, page=None, sele
     else:
         assert data is not None
         path.write_bytes(data)
-    if SCREENS.is_dir():
-        shutil.copy(path, SCREENS / name)
-
-
-def _open(browser, url: str):
-    page = browser.new_page(viewport={"width": 1500, "height": 950})
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text)
-            if m.type == "error" and "Failed to load resource" not in m.text else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url, timeout=120_000)
-    page.wait_for_function("document.getElementById('server-state').textContent.startsWith('server ok')",
-                           timeout=120_000)
-    return page, errors
 
 
 def _fill_start(page, setpoint: float, t_E: float, duration: float, speed: str, osc: bool) -> None:
@@ -88,7 +70,7 @@ def _msg(page, id_: str) -> str:
 
 
 def test_forms_take_a_decimal_comma_and_a_changed_run_reads_as_what_happened(server, browser, artifacts) -> None:
-    page, errors = _open(browser, server.url)
+    page, errors = open_dashboard(browser, server.url, 1500, 950)
     page.evaluate(WATCH_START)
     # the faults form reads numbers the same way: a thousands separator refused in words, a decimal comma taken
     page.select_option("#fault-target", "TC2")
@@ -191,7 +173,7 @@ def test_forms_take_a_decimal_comma_and_a_changed_run_reads_as_what_happened(ser
 def test_the_comparison_answers_did_oscillation_help(server, browser, artifacts) -> None:
     """Two runs of the same reference, fixed and oscillating, compared: labels in legends and columns, the
     windows shaded, a difference column, and the true-vs-estimated reading."""
-    page, errors = _open(browser, server.url)
+    page, errors = open_dashboard(browser, server.url, 1500, 950)
     ids = []
     for osc in (False, True):
         _fill_start(page, 800.0, 20.0, 45.0, "max", osc=osc)

@@ -122,3 +122,32 @@ def test_a_study_going_at_shutdown_is_interrupted_and_resumes_after_restart(tmp_
         assert body["status"] == "interrupted"
         assert c.post(f"/api/studies/{study_id}/resume").status_code == 202
         assert wait_study(c, study_id, {"finished"}, timeout=10)["finished"] == 2
+
+
+class TimedRunner(FakeStudyRunner):
+    """The fake engine, with the timing figures a real study writes: 3 s per case (median), 5 s first load."""
+
+    def __call__(self, spec, cfg, out, **kw):
+        import json
+
+        summary = super().__call__(spec, cfg, out, **kw)
+        summary["timing"] = {"case_s": 3.0, "load_s": 5.0}
+        (out / "summary.json").write_text(json.dumps(summary))
+        return summary
+
+
+def test_plan_says_the_cases_and_an_estimate_from_the_finished_studies(tmp_path, small_cfg) -> None:
+    """Issue 27 item 8: before Start, the cases (design points x seeds) and an estimated wall time."""
+    plan_doc = {"base": {**BASE, "duration": 24.0}, "grid": {"tc_noise": [0.5, 1.0], "seed": [1, 2, 3]}}
+    with make_client(tmp_path, small_cfg, TimedRunner(), study_workers=2) as c:
+        first = c.post("/api/studies/plan", json=plan_doc)
+        assert first.status_code == 200, first.text
+        assert first.json()["estimate_s"] is None and "no study has finished" in first.json()["basis"]
+        assert c.post("/api/studies/plan", json={"grid": {"oscillation.perod": [6.0]}}).status_code == 422
+        done = c.post("/api/studies", json={"name": "timed", "base": BASE, "grid": {"tc_noise": [0.5, 1.0]}})
+        wait_study(c, done.json()["id"], {"finished"})
+        plan = c.post("/api/studies/plan", json=plan_doc).json()
+    # 6 cases on 2 workers: 3 waves of a 24 s case at 3 s per 12 s case (0.25 s/s), plus the 5 s first load
+    assert (plan["cases"], plan["points"], plan["per_point"], plan["workers"]) == (6, 2, 3, 2)
+    assert plan["estimate_s"] == pytest.approx(5.0 + 3 * 24.0 * 0.25)
+    assert "timed" in plan["basis"]

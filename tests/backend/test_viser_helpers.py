@@ -110,3 +110,22 @@ def test_scene_colours_the_plate_by_sigma_when_asked(small_cfg) -> None:
         assert len(np.unique(scene.plate_rgb, axis=0)) == 1
     finally:
         server.stop()
+
+
+def test_lamp_group_labels_never_sit_side_by_side_at_the_same_end(small_cfg) -> None:
+    """Issue 27 item 10: "T3hT1h".  Two group labels at the same end of the lamps closer across the array than a
+    label's width (5 cm: "T3h" is about 3 cm at the default zoom) must be staggered along the lamps by 2 cm or more.
+    The old placement (ends alternating by group number) put T3h and T1h 2.4 cm apart on one line."""
+    from backend.viser.scene import group_label_places
+    from twin.physics.geometry import display_meshes
+
+    boxes = {n: (v.min(axis=0), v.max(axis=0)) for n, _, v, _ in display_meshes(small_cfg, 0.0)}
+    places = group_label_places(small_cfg, boxes)
+    assert {text for _, text, _, _ in places} == {g.name for g in small_cfg.lamps.groups}  # every group named
+    for side, across, along in (("h", 0, 1), ("v", 1, 0)):
+        mine = [(pos, anchor) for node, _, pos, anchor in places if node.rsplit("-", 1)[1].startswith(side)]
+        assert len(mine) >= 2
+        for i, (p, a) in enumerate(mine):
+            for q, b in mine[i + 1:]:
+                if a == b and abs(p[across] - q[across]) < 0.05:
+                    assert abs(p[along] - q[along]) >= 0.02, (side, p, q)

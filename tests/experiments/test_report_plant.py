@@ -38,3 +38,43 @@ def test_a_simulated_furnace_is_named_with_its_noise_seed_and_truth() -> None:
     text = "\n".join(_scenario_lines(ts, windows_of(ts)))
     assert "TC noise 1.0 K · seed 3 · truth shared" in text and "emissivity +10 %" in text
     assert "OPC UA" not in text and "late" not in text
+
+
+def _event_texts(n: int, length: int):
+    """The report's bottom row (the same grid as report_figure) with ``n`` warnings of ``length`` characters,
+    drawn; its text artists and the figure's renderer."""
+    from matplotlib.figure import Figure
+
+    from twin.events import RunEvent
+    from twin.experiments.report import _event_columns, report_grid
+
+    fig = Figure(figsize=(11.69, 8.27))
+    ax = fig.add_subplot(report_grid(fig, True, n)[3, :])
+    ax.axis("off")
+    words = ("the fillet mean stayed up to 9.0 K above the reference (the lamps cannot cool it) while T3h was off "
+             "and the feedback had no headroom left")
+    events = [RunEvent(float(10 * k), "said", "warn", {"text": f"warning {k}: " + (words * 3)[:length]})
+              for k in range(n)]
+    _event_columns(fig, ax, events)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    return fig, [t.get_window_extent(renderer) for t in ax.texts], renderer
+
+
+def test_the_report_event_columns_never_overlap_and_stay_on_the_page() -> None:
+    """Issue 27 item 10: two columns cut at 95 characters were wider than half the page at 7 pt, so long lines
+    ran into the second column.  Now every event is wrapped whole, in columns that do not overlap."""
+    for n, length in ((4, 150), (12, 150), (16, 150), (30, 60), (40, 220)):  # the last one cut, said so
+        fig, boxes, _ = _event_texts(n, length)
+        width, height = fig.bbox.width, fig.bbox.height
+        for b in boxes:
+            assert b.x0 >= 0 and b.x1 <= width and b.y0 >= 0 and b.y1 <= height, (n, length, b)
+        for a, b in zip(boxes, boxes[1:], strict=False):
+            assert a.x1 <= b.x0 or b.x1 <= a.x0, (n, length, a, b)  # side by side, never over each other
+    fig, boxes, _ = _event_texts(4, 150)
+    assert len(boxes) == 1  # a few events: one column
+    fig, _, _ = _event_texts(16, 150)
+    assert "more lines" not in fig.axes[0].texts[-1].get_text()  # every event listed whole
+    fig, _, _ = _event_texts(40, 220)
+    assert "more lines: every event is in the run's files" in fig.axes[0].texts[-1].get_text()

@@ -33,6 +33,7 @@ from typing import IO, Any
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the server renders reports in worker threads
+from matplotlib.gridspec import GridSpec
 from matplotlib.patches import Rectangle
 from matplotlib.transforms import Bbox
 
@@ -109,8 +110,7 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     t_end = float(t[-1]) if t.size else 0.0
     w = windows_of(ts)
     fig = Figure(figsize=(11.69, 8.27))
-    grid = fig.add_gridspec(4, 3, height_ratios=[0.42 if story else 0.3, 1, 1, 0.32], hspace=0.6, wspace=0.3,
-                            left=0.06, right=0.98, top=0.95, bottom=0.02)
+    grid = report_grid(fig, bool(story), len(report_events(load_events(ts))))
     head = fig.add_subplot(grid[0, :])
     head.axis("off")
     head.text(0, 1.0, title or "furnace-twin run", fontsize=13, weight="bold", va="top")
@@ -179,22 +179,65 @@ def report_figure(ts: Mapping[str, Any], metrics: Mapping[str, Any], title: str 
     _metrics_table(fig.add_subplot(grid[2, 2]), metrics, w)
     ax = fig.add_subplot(grid[3, :])
     ax.axis("off")
-    events = load_events(ts)
+    _event_columns(fig, ax, load_events(ts))
+    return fig
+
+
+def report_grid(fig: Figure, story: bool, n_events: int) -> GridSpec:
+    """The page's rows: header, two rows of charts, the event list; the list's row grows from 6 events on
+    (up to the height of a chart row) so that every change and warning is listed whole and readable."""
+    events = 0.32 if n_events <= 6 else min(1.0, 0.32 + 0.08 * (n_events - 6))
+    return fig.add_gridspec(4, 3, height_ratios=[0.42 if story else 0.3, 1, 1, events], hspace=0.6, wspace=0.3,
+                            left=0.06, right=0.98, top=0.95, bottom=0.02)
+
+
+#: advance width of DejaVu Sans Mono (matplotlib's monospace) per em: how many characters a width holds
+MONO_EM = 0.602
+#: a PNG's glyph advances are hinted to whole pixels: up to one pixel (0.72 pt at 100 dpi) more per character
+RASTER_SLACK_PT = 0.72
+#: line height of the event list, in font sizes
+EVENT_LEADING = 1.25
+
+
+def _event_columns(fig: Figure, ax: Axes, events: list[Any]) -> None:
+    """The event list in the bottom row: wrapped (never cut) to the width it has, in one column if it fits in
+    the height down to the page's edge, else two side by side; the font shrinks from 7 to 4.5 pt before that.
+    Two columns used to be cut at 95 characters, wider than half the page at 7 pt: long lines overlapped."""
     shown = report_events(events)
-    width = 160 if len(shown) <= 8 else 95  # one column, else two side by side
-    lines = [textwrap.shorten(f"{e.t:7.1f} s  {e.text}", width) for e in shown]
     left_out = len(events) - len(shown)
     more = f" ({left_out} other information events in the run's files)" if left_out else ""
     heading = f"the start, every change and every warning{more}:"
-    if not lines:
+    box = ax.get_position()
+    width_pt = box.width * fig.get_figwidth() * 72
+    height_pt = box.y1 * fig.get_figheight() * 72 - 4  # down to the page's edge
+    if not shown:
         ax.text(0, 1, f"{heading}\nnone recorded", fontsize=7, family="monospace", va="top")
-    half = (len(lines) + 1) // 2 if len(lines) > 8 else len(lines)
-    size = 7 if len(lines) <= 16 else max(4.5, 7 * 16 / len(lines))
-    for col, chunk in enumerate((lines[:half], lines[half:])):
-        if chunk:
-            ax.text(0.5 * col, 1, (heading if col == 0 else "") + "\n" + "\n".join(chunk), fontsize=size,
-                    family="monospace", va="top")
-    return fig
+        return
+    columns: list[list[str]] = []
+    size = 7.0
+    for size in (7.0, 6.5, 6.0, 5.5, 5.0, 4.5):
+        for n_cols in (1, 2):
+            chars = int((width_pt / n_cols - 10) / (MONO_EM * size + RASTER_SLACK_PT))
+            blocks = [textwrap.wrap(f"{e.t:7.1f} s  {e.text}", chars, subsequent_indent=" " * 11) for e in shown]
+            total = sum(len(b) for b in blocks)
+            columns = [[]]
+            for b in blocks:  # an event's lines stay together; a column is full at half the lines
+                if n_cols == 2 and len(columns) == 1 and columns[0] and len(columns[0]) + len(b) > (total + 1) // 2:
+                    columns.append([])
+                columns[-1] += b
+            if (1 + max(len(c) for c in columns)) * size * EVENT_LEADING <= height_pt:
+                break
+        else:
+            continue
+        break
+    else:  # too many even at 4.5 pt in two columns: as many lines as fit, and how many are left out
+        fit = max(1, int(height_pt / (size * EVENT_LEADING)) - 2)
+        cut = sum(max(0, len(c) - fit) for c in columns)
+        columns = [c[:fit] for c in columns]
+        columns[-1].append(f"... {cut} more lines: every event is in the run's files")
+    for k, lines in enumerate(columns):
+        ax.text(k / len(columns), 1, (heading if k == 0 else "") + "\n" + "\n".join(lines), fontsize=size,
+                family="monospace", va="top", linespacing=EVENT_LEADING)
 
 
 def report_events(events: list[Any]) -> list[Any]:

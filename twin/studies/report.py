@@ -43,33 +43,78 @@ def _finished(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
     return [r for r in rows if r["status"] in ("done", "skipped") and r.get("metrics")]
 
 
+#: a grid field that only replicates a design point (TC-noise seed): not part of the point, its spread is the noise
+REPLICATE_FIELD = "seed"
+
+
+def design_fields(spec: StudySpec) -> list[str]:
+    """The grid fields that make a design point: every grid field but ``seed``, whose values (like the Monte
+    Carlo samples) are replicates of one point."""
+    return [p for p in spec.grid if p != REPLICATE_FIELD]
+
+
+def point_values(spec: StudySpec, rows: Sequence[Mapping[str, Any]],
+                 metric: str) -> list[tuple[dict[str, Any], list[float], list[str]]]:
+    """Per design point (in the order met): its parameters, the metric over its finished replicates, and their
+    case keys."""
+    fields = design_fields(spec)
+    groups: dict[str, tuple[dict[str, Any], list[float], list[str]]] = {}
+    for r in _finished(rows):
+        v = r["metrics"].get(metric)
+        if v is None or not np.isfinite(v):
+            continue
+        point = {p: r["params"][p] for p in fields}
+        g = groups.setdefault(json.dumps(point, sort_keys=True), (point, [], []))
+        g[1].append(float(v))
+        g[2].append(r["key"])
+    return list(groups.values())
+
+
+def replicate_spread(groups: Sequence[tuple[Any, list[float], Any]]) -> tuple[float | None, int]:
+    """The seed-to-seed spread of a metric: the median over the design points run with two or more replicates
+    of their range (max - min), and how many points had replicates; None when no point had."""
+    ranges = [max(v) - min(v) for _, v, _ in groups if len(v) >= 2]
+    return (float(np.median(ranges)) if ranges else None), len(ranges)
+
+
 def best_cases(spec: StudySpec, rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Per metric: the best case (or grid point, by the median over the samples) and its value."""
-    done = _finished(rows)
+    """Per metric: the design points ranked by their median over the replicates (seeds, Monte Carlo samples).
+
+    ``value``/``params``/``n`` are the best point's; ``key`` its case when it ran once.  ``decided`` is true only
+    when the best point's median is below the next one's by more than the seed-to-seed spread
+    (:func:`replicate_spread`): a smaller difference, or no replicates to measure the spread, names no best case.
+    ``min``/``max`` span the points' medians (the range every map of the metric is coloured over)."""
     out = []
-    for m in _metric_keys(done):
-        if spec.grid and spec.monte_carlo is not None:
-            groups: dict[str, list[float]] = defaultdict(list)
-            params: dict[str, dict[str, Any]] = {}
-            for r in done:
-                v = r["metrics"].get(m)
-                point = {p: r["params"][p] for p in spec.grid}
-                k = json.dumps(point, sort_keys=True)
-                params[k] = point
-                if v is not None:
-                    groups[k].append(v)
-            if not groups:
-                continue
-            k = min(groups, key=lambda g: float(np.median(groups[g])))
-            out.append({"metric": m, "value": float(np.median(groups[k])), "params": params[k],
-                        "key": None, "n": len(groups[k])})
-        else:
-            cand = [r for r in done if r["metrics"].get(m) is not None]
-            if not cand:
-                continue
-            r = min(cand, key=lambda r: r["metrics"][m])
-            out.append({"metric": m, "value": r["metrics"][m], "params": r["params"], "key": r["key"], "n": 1})
+    for m in _metric_keys(_finished(rows)):
+        groups = point_values(spec, rows, m)
+        if not groups:
+            continue
+        ranked = sorted(groups, key=lambda g: float(np.median(g[1])))
+        medians = [float(np.median(g[1])) for g in ranked]
+        spread, replicated = replicate_spread(groups)
+        best = ranked[0]
+        margin = medians[1] - medians[0] if len(ranked) > 1 else None
+        out.append({"metric": m, "value": medians[0], "params": best[0], "key": best[2][0] if len(best[1]) == 1
+                    else None, "n": len(best[1]),
+                    "next": {"value": medians[1], "params": ranked[1][0]} if len(ranked) > 1 else None,
+                    "margin": margin, "spread": spread, "replicated_points": replicated, "points": len(ranked),
+                    "decided": margin is not None and spread is not None and margin > spread,
+                    "min": medians[0], "max": medians[-1]})
     return out
+
+
+def best_sentence(b: Mapping[str, Any]) -> str:
+    """What the study says about a metric's best point, in words (study.md; the view says the same)."""
+    if b["points"] < 2:
+        return "one design point: nothing to choose between"
+    if b["spread"] is None:
+        return (f"no best case: each point ran once, so the seed-to-seed spread is unknown (best {_pct(b['value'])}"
+                f" at {_params(b['params'])}, next {_pct(b['next']['value'])})")
+    if not b["decided"]:
+        return (f"no case is better than the seed spread of {_pct(b['spread'])} (best and next differ by "
+                f"{_pct(b['margin'])})")
+    return (f"best {_pct(b['value'])} at {_params(b['params'])}: {_pct(b['margin'])} below the next, more than "
+            f"the seed spread of {_pct(b['spread'])}")
 
 
 def percentiles(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
@@ -108,12 +153,13 @@ def write_report(path: Path, spec: StudySpec, furnace: str, summary: Mapping[str
             lines.append(f"  - `{p}` ~ {d.dist}({args})")
     lines.append("")
     lines += ["## Best case per metric", "",
-              "Errors relative to the setpoint; smaller is better."
-              + (" Grid points ranked by their median over the samples." if spec.grid and spec.monte_carlo else ""),
-              "", "| metric | best | where |", "|---|---|---|"]
+              "Errors relative to the setpoint; smaller is better. Design points (the grid without `seed`) are "
+              "ranked by their median over the seeds and samples; a best case is named only where it beats the "
+              "next by more than the seed-to-seed spread (median over the points of max - min over their seeds).",
+              "", "| metric | range of the points | seed spread | reading |", "|---|---|---|---|"]
     for b in best_cases(spec, rows):
-        where = _params(b["params"]) + (f" (case `{b['key']}`)" if b["key"] else f" (median of {b['n']})")
-        lines.append(f"| {b['metric']} | {_pct(b['value'])} | {where} |")
+        lines.append(f"| {b['metric']} | {_pct(b['min'])} - {_pct(b['max'])} | {_pct(b['spread'])} | "
+                     f"{best_sentence(b)} |")
     lines.append("")
     if spec.monte_carlo is not None:
         lines += _percentile_section(spec, rows)

@@ -33,6 +33,8 @@ def furnace(manager: ManagerDep) -> FurnaceOut:
                for side, a in (("horizontal", lamps.horizontal), ("vertical", lamps.vertical))},
         tc_relative=[list(p) for p in cfg.sensors.relative_positions],
         tc_positions=[list(p) for p in cfg.tc_positions()],
+        calibration_bounds={name: list(getattr(cfg.calibration.bounds, name)) for name in
+                            ("lamp_efficiency", "emissivity", "convection")},
         groups=[LampGroupOut(name=g.name, lamps=list(g.lamps)) for g in lamps.groups],
         limits=limits.to_json(),
         defaults=parse_scenario({}, limits).model_dump(mode="json"),

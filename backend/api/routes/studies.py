@@ -8,9 +8,9 @@ from fastapi import APIRouter, Body, HTTPException, Query, status
 from fastapi.responses import FileResponse
 
 from backend.api.deps import StudiesDep, TokenDep
-from backend.api.schemas import StudyDetail, StudyLinks, StudySummary
+from backend.api.schemas import StudyDetail, StudyLinks, StudyPlan, StudySummary
 from backend.studies.manager import STUDY_FILES, StudyNotFound, StudyState
-from twin.studies.report import best_cases, percentiles
+from twin.studies.report import best_cases, best_sentence, percentiles
 from twin.studies.spec import StudySpec
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -32,6 +32,14 @@ def start_study(studies: StudiesDep, study: Annotated[StudySpec, Body()]) -> Stu
     return summary(studies.submit(study))
 
 
+@router.post("/plan", response_model=StudyPlan,
+             responses={422: {"description": "invalid study, or over this server's limits"}})
+def plan_study(studies: StudiesDep, study: Annotated[StudySpec, Body()]) -> StudyPlan:
+    """What a start would run: the cases (design points x seeds or samples), the workers, and an estimated
+    wall time from this server's finished studies (``estimate_s`` null, with ``basis`` saying why, before any)."""
+    return StudyPlan(**studies.plan(study))
+
+
 @router.get("", response_model=list[StudySummary])
 def list_studies(studies: StudiesDep) -> list[StudySummary]:
     """All studies, newest first, with their progress."""
@@ -50,7 +58,7 @@ def get_study(study_id: str, studies: StudiesDep,
     detail["downloads"] = {n: f"{base}/{n}" for n in STUDY_FILES if (studies.folder(study_id) / n).is_file()}
     if result is not None:
         spec = StudySpec.model_validate(doc)
-        detail["best"] = best_cases(spec, result["cases"])
+        detail["best"] = [{**b, "reading": best_sentence(b)} for b in best_cases(spec, result["cases"])]
         detail["percentiles"] = percentiles(result["cases"]) if spec.monte_carlo is not None else None
         detail["timing"] = result.get("timing")
         if cases:
