@@ -4,8 +4,11 @@ import { helpMark, metricName } from "./glossary.js";
 import { esc, fmt } from "./page.js";
 import { state } from "./state.js";
 
-// the order of GET /api/glossary's metrics (twin.runs.metrics.METRIC_WORDS)
-const keys = () => (state.glossary ? Object.keys(state.glossary.metrics) : []);
+// the errors relative to the setpoint (shown in K and %), in the order of GET /api/glossary's metrics
+// (twin.runs.metrics.metric_glossary; its other metrics are shares, normalised squares or counts: not in K)
+const RELATIVE = "fraction of the setpoint"; // twin.runs.metrics.RELATIVE
+const keys = () => (state.glossary
+  ? Object.entries(state.glossary.metrics).filter(([, v]) => v.unit === RELATIVE).map(([k]) => k) : []);
 
 // The setpoint the relative errors of a run are divided by: its windows' (the last reference).
 export function scaleOf(run) {

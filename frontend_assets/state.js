@@ -3,7 +3,7 @@
 
 export const state = {
   furnace: null, // name, geometry, TC positions, lamp groups, scenario limits and defaults
-  glossary: null, // {metrics: {key: {name, meaning}}, terms: {key: text}, groups: {name: text}}
+  glossary: null, // {metrics: {key: {name, meaning, unit}}, terms: {key: text}, groups: {name: text}}
   health: null,
   runId: null, run: null, // the shown run and its GET /api/runs/{id} (reference, oscillation, windows in force)
   ws: null, frames: 0, series: null, lastFrame: null, dirty: false,

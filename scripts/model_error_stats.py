@@ -6,9 +6,10 @@
 
 ``measure`` runs the closed loop against the honest truth for each seed and reference (duration 2 t_E; a run
 already in ``--runs`` is reused) and prints the one-step defect's fitted q0, q1 and the representation rms
-(:mod:`twin.experiments.model_error_stats`) and, for each ``--scales`` factor on q0, the coverage, NEES and NIS
-of the runs replayed with it.  ``check`` prints the metrics of the runs replayed with the furnace file's
-``[ekf.model_error]`` as a Markdown table (``docs/uncertainty.md``).
+(:mod:`twin.experiments.model_error_stats`) and, for each ``--scales`` factor on q0 (with the furnace file's TC
+tolerance, ``[ekf.model_error] tc_tolerance_*``), the coverage, NEES and NIS of the runs replayed with it.
+``check`` prints the metrics of the runs replayed with the furnace file's ``[ekf.model_error]`` as a Markdown
+table (``docs/uncertainty.md``).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def run_once(cfg: Any, furnace: str, osc: bool, seed: int, setpoint: float, t_E:
 def main(argv: list[str] | None = None) -> int:
     from twin.config import load_config
     from twin.estimation.choice import estimator_model
-    from twin.experiments.model_error_stats import model_error_statistics, replay_metrics
+    from twin.experiments.model_error_stats import model_error_statistics, replay_metrics, replay_variants
     from twin.model.tables import model_tables
     from twin.radiation import radiation_model
     from twin.runs.record import load_arrays
@@ -70,10 +71,13 @@ def main(argv: list[str] | None = None) -> int:
 
         stats = model_error_statistics(cfg, runs, model_for)
         sys.stdout.write(json.dumps(stats) + "\n")
-        for c in args.scales:
-            me = {"q0": c * stats["q0"], "q1": stats["q1"], "representation_rms": stats["representation_rms"]}
-            scaled = cfg.with_overrides({"ekf.model_error": me})
-            ms = [replay_metrics(scaled, ts, tables)[0] for ts in runs]
+        # each scale of the measured q0, with the furnace file's TC tolerance (consider states; 0 = none)
+        base = cfg.ekf.model_error.model_dump() if cfg.ekf.model_error is not None else {}
+        mes = [{**base, "q0": c * stats["q0"], "q1": stats["q1"], "representation_rms": stats["representation_rms"]}
+               for c in args.scales]
+        per_run = [replay_variants(cfg, ts, tables, mes)[0] for ts in runs]  # one filter replay per run
+        for i, c in enumerate(args.scales):
+            ms = [r[i] for r in per_run]
             sys.stdout.write(json.dumps({"scale": c, **{k: [round(m[k], 4) for m in ms] for k in KEYS[:4]}}) + "\n")
         return 0
     rows = ["| run | " + " | ".join(KEYS) + " |", "|---" * (len(KEYS) + 1) + "|"]

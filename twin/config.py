@@ -312,6 +312,15 @@ class ModelError(_Section):
     q0: float = Field(gt=0)
     q1: float = Field(ge=0)
     representation_rms: float = Field(ge=0)
+    # the TCs' datasheet tolerance max(fixed, relative |t in C|): their unknown fixed deviations as consider
+    # states of the reported covariance (twin.estimation.thermocouple_tolerance); both 0 = left out
+    tc_tolerance_fixed: float = Field(0.0, ge=0, le=50.0, description="K")
+    tc_tolerance_relative: float = Field(0.0, ge=0, le=0.05, description="fraction of |t| in C")
+
+    @property
+    def tc_bias(self) -> bool:
+        """True when the TCs' deviations are carried (a tolerance is stated)."""
+        return self.tc_tolerance_fixed > 0 or self.tc_tolerance_relative > 0
 
 
 class EKFWeights(_Section):

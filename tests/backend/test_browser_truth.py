@@ -74,9 +74,12 @@ def _metric_rows(page, selector: str) -> dict[str, list[str]]:
 
 
 def _names(srv) -> dict[str, str]:
-    """Metric key -> the words the dashboard shows for it (GET /api/glossary)."""
+    """Metric key -> the words the dashboard's K / % table shows for it (GET /api/glossary: the metrics relative
+    to the setpoint; coverage, NEES, NIS, shares and counts have other units and a note of their own)."""
+    from twin.runs.metrics import RELATIVE
+
     glossary = httpx.get(f"{srv.url}/api/glossary", timeout=30).json()["metrics"]
-    return {k: (v["name"] if isinstance(v, dict) else v) for k, v in glossary.items()}
+    return {k: v["name"] for k, v in glossary.items() if v["unit"] == RELATIVE}
 
 
 def _row_for(rows: dict[str, list[str]], name: str) -> list[str]:

@@ -177,7 +177,9 @@ def test_refusals_are_plain_sentences(tmp_path, small_cfg, body, field, words) -
 def test_glossary_explains_every_metric_and_term(tmp_path, small_cfg) -> None:
     with make_client(tmp_path, small_cfg) as c:
         g = c.get("/api/glossary").json()
-    assert set(g["metrics"]) == set(METRIC_KEYS) and all(m["name"] and m["meaning"] for m in g["metrics"].values())
+    assert set(METRIC_KEYS) | {"coverage_2sigma_steady", "nees_mean", "late_samples"} <= set(g["metrics"])
+    assert all(m["name"] and m["meaning"] and m["unit"] for m in g["metrics"].values())
+    assert g["metrics"]["coverage_2sigma_steady"]["unit"] != g["metrics"]["mean_error_steady_max"]["unit"]
     for term in ("fillet", "t_E", "eta", "u_ff", "groups", "T_sup", "spread", "windows", "tc4", "saturation", "plant"):
         assert len(g["terms"][term]) > 40, term
     for group in small_cfg.lamps.groups:

@@ -110,3 +110,46 @@ def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
     np.testing.assert_array_equal(a.state.P, b.state.P)
     np.testing.assert_array_equal(b.reported_P, b.state.P)  # without model error the filter's P is reported
     assert not np.allclose(a.reported_P, a.state.P)
+
+
+#: faster dynamics for the deviations' test: the cross-covariance of error and deviations then decays between
+#: samples, so forgetting to propagate it shows (expected NEES 2.2 instead of 3; with A itself it hides)
+A_FAST = 0.6 * A
+
+
+def _simulate_biased(consider: bool, seed: int, runs: int = 200, steps: int = 40) -> np.ndarray:
+    """Monte Carlo of the system above (A_FAST) whose sensors read a fixed deviation beta_i * 1.5 K each (beta_i uniform
+    in [-1, 1] per run, the filter does not know it); returns per step the mean NEES of the estimate against the
+    reported covariance (the true Q, with or without the deviations as consider states)."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros(steps)
+    for _ in range(runs):
+        x = rng.multivariate_normal(np.zeros(3), np.eye(3))
+        beta = rng.uniform(-1.0, 1.0, 2)
+        state = EKFState(np.zeros(3), np.eye(3))
+        report = ReportedCovariance(np.eye(3), Q_TRUE, readings=2, tc_tolerance=(1.5, 0.0) if consider else None)
+        for k in range(steps):
+            x = A_FAST @ x + rng.multivariate_normal(np.zeros(3), Q_TRUE)
+            state = EKFState(A_FAST @ state.theta, A_FAST @ state.P @ A_FAST.T + Q_TRUE)
+            report.predict(A_FAST)
+            y = C @ x + 1.5 * beta + rng.multivariate_normal(np.zeros(2), R)
+            state, info = ekf_update(state, y, C, R, gate=np.inf)
+            report.update(info.gain, C, R, info.innovation, info.used, y)
+            out[k] += nees(state.theta - x, report.P[:3, :3]) / runs
+    return out
+
+
+def test_consider_states_make_the_reported_covariance_consistent_under_fixed_sensor_deviations() -> None:
+    """Each sensor reads a deviation fixed for the run (a TC's tolerance, uniform over +-1.5 K): the filter,
+    matched to the white noise, pulls its estimate towards the biased readings.  Without the deviations in the
+    reported covariance its NEES leaves the chi-square region (the error the issue measured: a constant error
+    that white Q cannot represent); with them as Schmidt-Kalman consider states (variance 1.5^2 / 3) it stays
+    inside.  Expected NEES (exact, from the covariances): 3.0 with, 5.1 without.  Planted bug: not propagating the
+    cross-covariance in ``predict`` (P[:m, m:] kept) gives 2.2 and fails it.
+    The NEES is not exactly chi-square here (beta is uniform, not Gaussian), but its mean is dof when the
+    covariance is right, which the 99 % region of chi2(3 * 200) / 200 tests for."""
+    lo, hi = chi2_interval(dof=3, runs=200, probability=0.99)
+    without = _simulate_biased(False, seed=21)
+    assert np.mean(without[20:] > hi) > 0.9, without
+    with_bias = _simulate_biased(True, seed=21)
+    assert np.sum((with_bias < lo) | (with_bias > hi)) <= 2, with_bias

@@ -279,3 +279,36 @@ def test_tc4_oscillation_amplitude_is_that_of_the_signed_error():
     m = compute_metrics(ts)
     assert m["tc4_error_oscillation_amplitude"] == pytest.approx(2.0 / 1100.0, rel=1e-6)
     assert m["tc4_error_steady_max"] == pytest.approx(2.0 / 1100.0, rel=1e-3)  # the peak, for comparison
+
+
+def test_every_metric_a_run_writes_has_glossary_words_with_a_unit():
+    """A run with every optional part (a truth, the reported sigma and NIS, an oscillation, calibration, a shadow
+    estimator, TC status): each key of its metrics (and of its shadow's) has a name, a meaning and a unit in
+    the glossary (GET /api/glossary), and only errors relative to the setpoint carry that unit (the dashboard
+    shows those in K and %; a share is not a % of the setpoint).  Fails when a metric is added without words."""
+    import json
+
+    from twin.runs.metrics import RELATIVE, metric_glossary, run_metrics
+
+    ts = _series()
+    n_t = len(ts["t"])
+    ts["field_sigma"] = np.ones_like(ts["field_hat"])
+    ts["nis"] = np.ones(n_t)
+    ts["eta"] = 0.01 * np.sin(2 * np.pi * ts["t"] / 4.0)
+    ts["scenario"] = json.dumps({"oscillation": {"enabled": True, "period": 4.0}})
+    ts["u"] = np.full((n_t, 6), 0.5)
+    ts["parameters"] = np.zeros((n_t, 3))
+    ts["parameter_sigma"] = np.full((n_t, 3), 0.01)
+    ts["tc_status"] = np.zeros((n_t, 4), np.int8)
+    for k in ("T_mean_hat", "tc_hat", "field_hat"):
+        ts[f"shadow_{k}"] = ts[k].copy()
+    m = run_metrics(ts)
+    glossary = metric_glossary()
+    written = set(m) - {"shadow"} | set(m["shadow"]) - {"shadow"}
+    assert {"coverage_2sigma_steady", "tc4_error_oscillation_amplitude", "calibration", "late_samples",
+            "full_power_steady_max", "true_mean_error_transient_max"} <= written  # the series has every part
+    for key in written:
+        words = glossary[key]
+        assert words["name"] and len(words["meaning"]) > 20 and words["unit"], key
+    relative = {k for k, w in glossary.items() if w["unit"] == RELATIVE}
+    assert set(METRIC_KEYS) | {"true_mean_error_transient_max", "tc4_error_oscillation_amplitude"} == relative

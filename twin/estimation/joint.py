@@ -97,7 +97,10 @@ class JointEstimator:
         #: the covariance the twin reports (twin.estimation.process_noise), None: the filter's own P is reported
         self.reported: ReportedCovariance | None = None
         if e.model_error is not None:
-            self.reported = ReportedCovariance(P0, reported_process_noise(fe.M, e.model_error, self.Q[n:, n:]))
+            me = e.model_error
+            self.reported = ReportedCovariance(
+                P0, reported_process_noise(fe.M, me, self.Q[n:, n:]), readings=C.shape[0],
+                tc_tolerance=(me.tc_tolerance_fixed, me.tc_tolerance_relative) if me.tc_bias else None)
         self._cov_dtype = np.float32 if e.covariance_precision == "single" else np.float64
         self._tol = e.jacobian_tolerance
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))
@@ -169,7 +172,7 @@ class JointEstimator:
         x, self.last_info = ekf_update(self._x, y, self.C, self.R, self.gate, 0 if learn else self.k)
         info = self.last_info
         if self.reported is not None and info.gain is not None:
-            self.reported.update(info.gain, self.C, self.R, info.innovation, info.used)
+            self.reported.update(info.gain, self.C, self.R, info.innovation, info.used, np.asarray(y, float))
         if self.k:
             p = x.theta[self.n:]
             clipped = np.clip(p, self._lo, self._hi)

@@ -15,6 +15,19 @@ parameters of a calibrating filter keep the filter's random walk).
 
 NIS: nu^T S_rep^{-1} nu / p over the p readings used, S_rep = C P^- C^T + R (1 on average when consistent).
 
+**The thermocouples' fixed deviations (Schmidt-Kalman "consider" states).**  A TC reads
+y_i = C_i theta + beta_i tol(y_i) + v_i with a deviation beta_i that stays the same for the whole run
+(:mod:`twin.estimation.thermocouple_tolerance`, variance 1/3).  White process noise cannot stand for a constant
+error: the filter pulls its estimate towards the biased readings, and the error that leaves is common to the
+whole field and never averages out.  With ``tc_tolerance`` the reported covariance is that of the augmented
+error eps = (theta_hat - theta, -beta) (Brown and Hwang 2012, "consider" filter; Schmidt 1966): the filter's
+gain has zero rows for beta (it does not estimate them, so the estimate is unchanged), and
+
+    Phi_a = [[Phi, 0], [0, I]],   Q_a = [[Q_rep, 0], [0, 0]],   C_a = [C, diag(tol(y))],   L_a = [L; 0]
+
+in the same Joseph form, which is exact for this gain.  The innovation's covariance then includes the
+deviations as well: S_rep = C_a P^- C_a^T + R.
+
 Example
 -------
 >>> import numpy as np
@@ -23,6 +36,10 @@ Example
 >>> rep.update(np.array([[0.5], [0.0]]), np.array([[1.0, 0.0]]), np.eye(1), np.array([1.0]), np.array([True]))
 >>> np.round(np.diag(rep.P), 3).tolist(), round(rep.nis, 3)   # (1 - 0.5)^2 1.1 + 0.25, 1.1; 1 / 2.1
 ([0.525, 1.1], 0.476)
+>>> biased = ReportedCovariance(np.eye(1), np.zeros((1, 1)), readings=1, tc_tolerance=(1.5, 0.0))
+>>> biased.update(np.array([[0.5]]), np.eye(1), np.eye(1), np.array([0.0]), np.array([True]), np.array([300.0]))
+>>> round(float(biased.P[0, 0]), 4)   # 0.25 (1 + 1) + 0.25 * 1.5^2 / 3: half of the deviation goes into the error
+0.6875
 """
 
 from __future__ import annotations
@@ -33,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.estimation.ekf import process_noise, propagate_covariance
+from twin.estimation.thermocouple_tolerance import BETA_VARIANCE, tolerance
 
 Array = NDArray[np.float64]
 
@@ -50,26 +68,53 @@ def reported_process_noise(M: Array, model_error: Any, parameter_noise: Array | 
 
 
 class ReportedCovariance:
-    """The second covariance of the module docstring: ``predict(Phi)`` and ``update(gain, C, R, nu, used)``.
+    """The second covariance of the module docstring: ``predict(Phi)`` and ``update(gain, C, R, nu, used, y)``.
 
     Parameters
     ----------
     P0 : initial covariance (the filter's)
     Q : Q_rep (same size)
+    readings : number of TCs the filter reads (the consider states' count; needed with ``tc_tolerance``)
+    tc_tolerance : (fixed K, relative of |t| in C) of the TCs' datasheet: carry their deviations as consider
+        states (module docstring); None: the readings are taken as unbiased
     """
 
-    def __init__(self, P0: Array, Q: Array) -> None:
-        self.P = np.array(P0, float)
+    def __init__(self, P0: Array, Q: Array, readings: int = 0, tc_tolerance: tuple[float, float] | None = None,
+                 ) -> None:
+        P0 = np.asarray(P0, float)
+        self.m = P0.shape[0]  # the filter's state; the consider states follow
+        self.tc_tolerance = tc_tolerance
+        b = readings if tc_tolerance is not None else 0
+        self.P = np.zeros((self.m + b, self.m + b))
+        self.P[: self.m, : self.m] = P0
+        self.P[self.m:, self.m:] = BETA_VARIANCE * np.eye(b)
         self.Q = np.asarray(Q, float)
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
 
     def predict(self, Phi: NDArray[np.floating[Any]]) -> None:
-        """P^- = Phi P Phi^T + Q_rep (15)."""
-        self.P = propagate_covariance(Phi, self.P, self.Q)
+        """P^- = Phi P Phi^T + Q_rep (15); the deviations stay what they were (Phi_a of the module docstring)."""
+        m = self.m
+        if self.P.shape[0] == m:
+            self.P = propagate_covariance(Phi, self.P, self.Q)
+            return
+        P = self.P.copy()
+        P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
+        P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
+        P[m:, :m] = P[:m, m:].T
+        self.P = P
 
-    def update(self, gain: Array, C: Array, R: Array, innovation: Array, used: NDArray[np.bool_]) -> None:
-        """Joseph form (13) with the filter's gain (n, p; zero columns for readings left out) and the NIS."""
+    def update(self, gain: Array, C: Array, R: Array, innovation: Array, used: NDArray[np.bool_],
+               readings: Array | None = None) -> None:
+        """Joseph form (13) with the filter's gain (n, p; zero columns for readings left out) and the NIS;
+        ``readings`` (K, the TCs' values) set tol(y) of the consider states (required with them)."""
+        b = self.P.shape[0] - self.m
+        if b:
+            if readings is None:
+                raise ValueError("the TCs' deviations are carried: update needs the readings")
+            tol = np.nan_to_num(tolerance(readings, *self.tc_tolerance or (0.0, 0.0)), nan=0.0)
+            C = np.concatenate([C, np.diag(tol)], axis=1)
+            gain = np.concatenate([gain, np.zeros((b, gain.shape[1]))], axis=0)
         PCt = self.P @ C.T
         S = C @ PCt + R
         if used.any():

@@ -104,26 +104,72 @@ def replay_metrics(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any) -> tu
     Follows the loop's order (update with TC1-3, learning while the reference holds, then predict with the applied
     powers at eta); a run whose fault detection left a TC out or that changed its reference live is not replayed
     exactly (the deviation says so)."""
+    metrics, deviation = replay_variants(cfg, ts, tables, [cfg.ekf.model_error])
+    return metrics[0], deviation
+
+
+class _Reports:
+    """Several reported covariances fed by one filter (the ``reported`` of the estimator): the first answers."""
+
+    def __init__(self, members: list[Any]) -> None:
+        self.members = members
+
+    @property
+    def P(self) -> Any:
+        return self.members[0].P
+
+    @property
+    def nis(self) -> float:
+        return float(self.members[0].nis)
+
+    def predict(self, Phi: Any) -> None:
+        for r in self.members:
+            r.predict(Phi)
+
+    def update(self, *args: Any) -> None:
+        for r in self.members:
+            r.update(*args)
+
+
+def replay_variants(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any, model_errors: list[Any],
+                    ) -> tuple[list[dict[str, Any]], float]:
+    """:func:`replay_metrics` for several ``[ekf.model_error]`` at once (one filter, one reported covariance per
+    entry, :class:`twin.config.ModelError` or a dict of its fields): the metrics of each and the deviation."""
     from twin.estimation.choice import build_estimator
     from twin.estimation.uncertainty import FieldUncertainty
     from twin.runs.metrics import compute_metrics
 
+    if any(me is None for me in model_errors):
+        raise ValueError("a replay compares reported covariances: each variant needs an [ekf.model_error]")
+    variants = [cfg.with_overrides({"ekf.model_error": me if isinstance(me, dict) else me.model_dump()})
+                for me in model_errors]
     sc = Scenario.model_validate_json(str(ts["scenario"]))
     t, tc, u, eta = (np.asarray(ts[k], float) for k in ("t", "tc", "u", "eta"))
-    est = build_estimator(sc.estimator, tables, sc.oscillation, cfg, float(np.nanmean(tc[0, :3])))
-    me = cfg.ekf.model_error
-    unc = FieldUncertainty(est.model.fe, 0.0 if me is None else me.representation_rms)
+    y0 = float(np.nanmean(tc[0, :3]))
+    ests = [build_estimator(sc.estimator, tables, sc.oscillation, v, y0) for v in variants]
+    est = ests[0]
+    reports = _Reports([e.reported for e in ests])
+    est.reported = reports  # type: ignore[assignment]  # the first filter drives every reported covariance
+    n = est.n
+    uncs = [FieldUncertainty(est.model.fe, getattr(v.ekf.model_error, "representation_rms", 0.0)) for v in variants]
     tf = np.asarray(ts["t_field"], float)
     shape = np.asarray(ts["field_hat"]).shape
-    sigma, hat, nis = np.zeros(shape), np.zeros(shape), np.zeros(len(t))
+    sigmas = [np.zeros(shape) for _ in variants]
+    nis = np.zeros((len(variants), len(t)))
+    hat = np.zeros(shape)
     t_E, k = float(ts["t_E"]), 0
     for j in range(len(t)):
         est.update(tc[j, :3], learn=bool(t[j] >= t_E - 1e-9))
-        nis[j] = est.nis
+        nis[:, j] = [r.nis for r in reports.members]
         if k < len(tf) and abs(tf[k] - t[j]) < 1e-6:
-            sigma[k], hat[k] = unc.field_sigma(est.reported_P), est.model.fe.field_on_cells(est.state.theta)
+            for s, unc, r in zip(sigmas, uncs, reports.members, strict=True):
+                s[k] = unc.field_sigma(r.P[:n, :n])
+            hat[k] = est.model.fe.field_on_cells(est.state.theta)
             k += 1
         est.predict(u[j], float(eta[j]))
-    out = dict(ts)
-    out.update(field_sigma=sigma, nis=nis)
-    return compute_metrics(out), float(np.max(np.abs(hat - np.asarray(ts["field_hat"], float))))
+    out = []
+    for i in range(len(variants)):
+        d = dict(ts)
+        d.update(field_sigma=sigmas[i], nis=nis[i])
+        out.append(compute_metrics(d))
+    return out, float(np.max(np.abs(hat - np.asarray(ts["field_hat"], float))))

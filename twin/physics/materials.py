@@ -23,6 +23,9 @@ from twin.config import FurnaceConfig
 
 Array = NDArray[np.float64]
 
+#: K at 0 C (tolerances and furnace readings stated in C)
+KELVIN_OFFSET = 273.15
+
 
 @dataclass(frozen=True)
 class Steel:

@@ -191,6 +191,50 @@ UNCERTAINTY_WORDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: the metrics a run has only in some configurations (:func:`_extras`, :func:`run_metrics`) in words
+EXTRA_WORDS: dict[str, tuple[str, str]] = {
+    "true_mean_error_transient_max": (
+        "True mean error, transient (max)",
+        "largest |true fillet mean - reference| in the transient window (simulations only)"),
+    "tc4_error_oscillation_amplitude": (
+        "TC4 error, oscillation amplitude",
+        "amplitude of the signed TC4 error (reading - estimate) at the oscillation frequency over the steady "
+        "window (oscillating runs only)"),
+    "full_power_steady_max": (
+        "Full power, steady (max share)",
+        "largest share of the steady window's samples that any lamp group spends at full power (u >= 0.999)"),
+    "late_samples": (
+        "Late samples",
+        "samples with a TC reading that did not come in time (a real-time furnace; 0 for a simulation)"),
+    "calibration": (
+        "Calibration at the end",
+        "a calibrating run's learned parameters at its end, each a value and its standard deviation, relative "
+        "deviations from the model's nominal value (-0.1 = 10 % below)"),
+}
+#: the unit of a metric relative to the setpoint of its windows (x 100: %, x setpoint: K)
+RELATIVE = "fraction of the setpoint"
+#: each metric's unit (what its number is): relative errors, shares, normalised squares, counts
+METRIC_UNITS: dict[str, str] = {
+    **{k: RELATIVE for k in METRIC_KEYS},
+    "true_mean_error_transient_max": RELATIVE,
+    "tc4_error_oscillation_amplitude": RELATIVE,
+    "coverage_2sigma_transient": "share of fillet cells x samples (0-1)",
+    "coverage_2sigma_steady": "share of fillet cells x samples (0-1)",
+    "nees_mean": "1 (normalised square; 1 when consistent)",
+    "nis_mean": "1 (normalised square; 1 when consistent)",
+    "full_power_steady_max": "share of the steady window's samples (0-1)",
+    "late_samples": "samples (count)",
+    "calibration": "fraction of the model's nominal value",
+}
+
+
+def metric_glossary() -> dict[str, dict[str, str]]:
+    """Every metric a run can write (``metrics.json``; a shadow estimator's under ``shadow`` has the same keys) in
+    words: ``{key: {"name", "meaning", "unit"}}``, the setpoint-relative errors first, in the report's order."""
+    words = {**METRIC_WORDS, **EXTRA_WORDS, **UNCERTAINTY_WORDS}
+    return {k: {"name": n, "meaning": m, "unit": METRIC_UNITS[k]} for k, (n, m) in words.items()}
+
+
 def window(t: Array, t_E: float, which: Literal["transient", "steady", "after_start"],
            t0: float = 0.0) -> NDArray[np.bool_]:
     """Boolean mask of the transient (t0..t0+t_E), steady (t0+1.5..t0+2 t_E) or after-start

@@ -1,6 +1,8 @@
 """``GET /api/glossary``: the words the dashboard explains (its help tooltips), for the loaded furnace.
 
-``metrics``: each metric's name and meaning (``twin.runs.metrics.METRIC_WORDS``, also in the report);
+``metrics``: each metric's name, meaning and unit (``twin.runs.metrics.metric_glossary``: every key a run's
+``metrics.json`` can hold; the setpoint-relative errors, also in the report, have the unit
+``twin.runs.metrics.RELATIVE``);
 ``terms``: fillet, t_E, eta, u, u_ff, the lamp groups (each one's lamps, from the furnace), TC4,
 T_sup, spread, the metric windows, saturation, feasibility.  One place for these texts.
 """
@@ -14,7 +16,7 @@ from fastapi import APIRouter
 from backend.api.deps import ManagerDep
 from twin.config import FurnaceConfig
 from twin.physics.fillet import FILLET_X, FILLET_Y
-from twin.runs.metrics import METRIC_WORDS
+from twin.runs.metrics import metric_glossary
 
 router = APIRouter(prefix="/api", tags=["furnace"])
 
@@ -93,7 +95,7 @@ def glossary(cfg: FurnaceConfig) -> dict[str, Any]:
                  "furnace over OPC UA (a real one, or furnace-twin emulate): real time on its clock, no truth, samples "
                  "that come late counted. The server connects only to the endpoints its settings allow.",
     }
-    return {"metrics": {k: {"name": n, "meaning": m} for k, (n, m) in METRIC_WORDS.items()}, "terms": terms,
+    return {"metrics": metric_glossary(), "terms": terms,
             "groups": groups}
 
 

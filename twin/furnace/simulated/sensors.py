@@ -31,10 +31,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.furnace.simulated.lags import held_input_step, ramp_input_step
 from twin.furnace.simulated.thermocouples import Thermocouples
+from twin.physics.materials import KELVIN_OFFSET
 
 Array = NDArray[np.float64]
 
-KELVIN_OFFSET = 273.15
 #: IEC 60584-1 class 1, type K: +-1.5 K from -40 C to 375 C, +-0.004 |t| from 375 C to 1000 C
 CLASS1_FIXED_K = 1.5
 CLASS1_RELATIVE = 0.004
