@@ -41,6 +41,10 @@ class LoopFactory:
         """Where the model's warm-up stands (``backend.runs.loop_factory.WarmUpStatus``); ``None``: no warm-up."""
         return None
 
+    def retry_warm_up(self, cfg: FurnaceConfig) -> bool:
+        """Start a failed warm-up again; False (nothing done) unless it failed: a factory without one never fails."""
+        return False
+
     # ---- checks before a run (each raises ValueError with a message; OSError too for the furnace) ----
     def check_reference(self, cfg: FurnaceConfig, reference: Reference) -> None:
         """The reference lies within what the furnace can reach."""

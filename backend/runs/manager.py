@@ -106,8 +106,7 @@ class RunManager:
 
     def retry_warm_up(self) -> bool:
         """Start the radiation model's warm-up again after it failed; False if it has not failed."""
-        retry = getattr(self.loop_factory, "retry_warm_up", None)
-        return bool(retry(self.cfg)) if callable(retry) else False
+        return bool(self.loop_factory.retry_warm_up(self.cfg))
 
     async def start(self, scenario: Scenario) -> str:
         """Register and launch a run; returns its id (:meth:`launch` without a request id)."""
