@@ -6,6 +6,8 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -17,24 +19,31 @@ def _script():
     return module
 
 
-def test_the_page_shows_the_committed_runs():
+@pytest.mark.parametrize("doc", ["docs/control.md", "README.md"])
+def test_the_page_shows_the_committed_runs(doc):
     script = _script()
-    page = (REPO / "docs" / "control.md").read_text()
+    page = (REPO / doc).read_text()
     shown = page.split(script.BEGIN, 1)[1].split(script.END, 1)[0].strip()
     made = script.table(REPO / "docs" / "control_runs").strip()
-    assert shown == made, "run: python scripts/control_table.py table --out docs/control_runs --write docs/control.md"
+    assert shown == made, ("run: python scripts/control_table.py table --out docs/control_runs "
+                           "--write docs/control.md README.md")
     assert made.count("\n") >= 2  # a header, its rule and at least one row of runs
 
 
 def test_the_table_marks_a_bound_it_misses(tmp_path):
-    """A made-up run above the transient bound on default is marked; banded rows are never marked."""
+    """A made-up run above issue 26's transient bound of its furnace is marked (default 1 %, banded 2 %), one
+    below it is not."""
     import json
 
     script = _script()
-    for furnace, err in (("default", 0.0123), ("banded", 0.03)):
+    for furnace, err in (("default", 0.0123), ("banded", 0.03), ("other", 0.05)):
         folder = tmp_path / furnace / "mpc"
         folder.mkdir(parents=True)
         (folder / "seed_0.json").write_text(json.dumps({"seed": 0, "true_mean_error_transient_max": err,
                                                         "controller": {}}))
     text = script.table(tmp_path)
-    assert "| default | mpc | 0 | 1.23 % ✗ |" in text and "| banded | mpc | 0 | 3.00 % |" in text
+    assert "| default | mpc | 0 | 1.23 % ✗ |" in text and "| banded | mpc | 0 | 3.00 % ✗ |" in text
+    assert "| other | mpc | 0 | 5.00 % |" in text  # a furnace without bounds is not judged
+    (tmp_path / "banded" / "mpc" / "seed_0.json").write_text(json.dumps({"seed": 0, "controller": {},
+                                                                         "true_mean_error_transient_max": 0.0195}))
+    assert "| banded | mpc | 0 | 1.95 % |" in script.table(tmp_path)

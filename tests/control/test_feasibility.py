@@ -141,6 +141,30 @@ def test_shortest_transition_is_the_edge_of_feasibility(setup) -> None:
     assert shortest_transition(model, cfg, 2000.0, 300.0, hold) is None  # above what full power holds
 
 
+def test_shortest_transition_ignores_a_start_that_runs_ahead(setup, small_radiation) -> None:
+    """The mean runs ahead of a slow reference's start by itself (lamps off, warm holders and walls): with c_p(T) in
+    the model by more than WARN_K.  That is no lag, so the shortest transition stays the edge of what full power can
+    follow.  Found on `banded` with learnt, weaker lamps, where the check answered "no t_E can" for a reference
+    that takes about 100 s; here the small furnace's model with lamps 40 % weaker (full-power hold 1247 K)."""
+    from twin.control.plan_model import CapacityModel
+    from twin.model.tables import Parameters
+
+    cfg, _, _ = setup
+    cp = CapacityModel.of(discrete_model(cfg, small_radiation, None, parameters=Parameters(lamp_efficiency=-0.4)),
+                          cfg)
+    hold = hold_range(cp, cfg)
+    t_E = shortest_transition(cp, cfg, 1100.0, 300.0, hold)
+    assert t_E is not None and 60.0 < t_E < 200.0
+
+    def gap(tE: float) -> np.ndarray:
+        ref = reference_trajectory(TransitionReference(setpoint=1100.0, t_E=tE), 300.0)
+        t, best = best_tracking(cp, ref, np.full(cp.n, 300.0), 0.0, int(1.2 * tE / cp.t_s) + 1)
+        return np.asarray(ref(t) - best)
+
+    assert np.min(gap(t_E)) < -WARN_K  # the premise: ahead of the reference's start by more than WARN_K
+    assert np.max(gap(t_E)) <= WARN_K < np.max(gap(0.9 * t_E))  # no lag at t_E, a lag 10 % faster
+
+
 def test_the_plans_reserve_is_named(setup) -> None:
     """A transition the lamps follow at full power but not within the plan's share (``feedforward_limit``):
     the check says the feedback will spend its reserve, and when.  Within the share: no such sentence."""
