@@ -88,6 +88,10 @@ def test_unknown_studies_and_files_are_404_and_changes_need_the_token(tmp_path, 
     with make_client(tmp_path, small_cfg, FakeStudyRunner(), api_token=TOKEN) as c:
         assert c.get("/api/studies/nope").status_code == 404
         assert c.post("/api/studies", json={"grid": {"tc_noise": [1.0]}}).status_code == 401
+        # planning is read-only but runs the study's validation: a POST like any other, it needs the token too
+        assert c.post("/api/studies/plan", json={"grid": {"tc_noise": [1.0]}}).status_code == 401
+        assert c.post("/api/studies/plan", json={"grid": {"tc_noise": [1.0]}},
+                      headers={"X-API-Token": TOKEN}).status_code == 200
         r = c.post("/api/studies", json={"grid": {"tc_noise": [1.0]}}, headers={"X-API-Token": TOKEN})
         assert r.status_code == 201
         study_id = r.json()["id"]
