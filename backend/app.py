@@ -22,7 +22,9 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from backend.api.conformance import document_body_errors, http_error
 from backend.api.links import add_links
 from backend.api.routes import (
     dashboard,
@@ -180,6 +182,7 @@ def create_app(
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)
     app.add_exception_handler(RequestValidationError, validation_error)  # plain words, short echoes
+    app.add_exception_handler(StarletteHTTPException, http_error)  # a 405's Allow names every method of its path
     app.add_middleware(SecurityMiddleware, settings=settings)  # Host, Origin, content type, body size, token
     openapi = app.openapi
 
@@ -187,7 +190,8 @@ def create_app(
         """FastAPI's schema with links from each POST to the resource it made, and this server's bounds."""
         if app.openapi_schema is None:
             served = limits.capped(settings.max_duration_s, settings.max_speed)
-            app.openapi_schema = apply_limits(add_links(openapi()), served, tuple(SHIPPED_FURNACES))
+            spec = document_body_errors(add_links(openapi()))
+            app.openapi_schema = apply_limits(spec, served, tuple(SHIPPED_FURNACES))
         return app.openapi_schema
 
     app.openapi = openapi_with_links  # type: ignore[method-assign]

@@ -31,6 +31,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Discriminator,
     Field,
@@ -80,7 +81,17 @@ def _check(r: lim.Range, value: float) -> float:
 #: A JSON number: an int or a float, never a bool or a string ("speed": true is not 1.0), never NaN or
 #: +-Infinity (the models below refuse non-finite floats: a JSON body with NaN, Infinity or 1e999 is a 422)
 Num = Annotated[float, Strict()]
-Int = Annotated[int, Strict()]
+def _whole(value: Any) -> Any:
+    """A whole float (2.0) as the int JSON Schema counts it as ("integer" takes 2.0); anything else as given."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+#: A JSON integer: 2 or 2.0 (JSON Schema's "integer"), never 2.5, a bool or a string
+Int = Annotated[int, Strict(), BeforeValidator(_whole)]
+#: A JSON true or false, never 0 / 1 or "yes" (the schema says boolean; a lax 0 was taken as false)
+Flag = Annotated[bool, Strict()]
 
 
 class _Model(BaseModel):
@@ -152,7 +163,7 @@ Reference = Annotated[
 class OscillationSpec(_Model):
     """eta(t) = amplitude sin(2 pi t / period) (paper section 5.2: 3 L_h sin(2 pi t / Pi), Pi = 0.15 t_E)."""
 
-    enabled: bool = False
+    enabled: Flag = False
     amplitude: Num = Field(_DEFAULT.amplitude.default, ge=0.0,
                              description="m; at most the furnace's eta_max, default 3 L_h capped at it "
                                          "(GET /api/furnace)")
@@ -232,7 +243,7 @@ class EstimatorChoice(_Model):
 
     motion: Literal["averaged", "position_aware"] = Field(
         "position_aware", description="'averaged' (paper, eq. 11) or 'position_aware' (model at eta(t_j))")
-    calibrate: bool = Field(True, description="learn lamp efficiency and emissivity online (joint EKF)")
+    calibrate: Flag = Field(True, description="learn lamp efficiency and emissivity online (joint EKF)")
 
 
 #: The paper's estimator, one setting away from the default.

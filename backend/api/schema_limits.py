@@ -17,7 +17,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from backend.api.study_schema import tighten_study
 from twin.limits import FAULT_VALUE_RANGE, GROUP_FAULT_KINDS, TC_FAULT_KINDS, TC_NAMES, Range, ScenarioLimits
+
+#: Scenario: a furnace over OPC UA runs in real time (speed 1, its default there) and takes no injected faults
+OPCUA_REAL_TIME: dict[str, Any] = {
+    "if": {"required": ["plant"], "properties": {
+        "plant": {"type": "object", "required": ["kind"], "properties": {"kind": {"const": "opcua"}}}}},
+    "then": {"properties": {"speed": {"const": 1}, "faults": {"maxItems": 0}}},
+}
 
 
 def _bounds(schema: dict[str, Any], r: Range) -> None:
@@ -92,4 +100,9 @@ def apply_limits(spec: dict[str, Any], limits: ScenarioLimits, furnaces: tuple[s
         if "furnace" in p and furnaces:
             p["furnace"].pop("anyOf", None)
             p["furnace"].update({"anyOf": [{"enum": list(furnaces)}, {"type": "null"}]})
+    for scenario in found.get("Scenario", []):
+        scenario.setdefault("allOf", []).append(OPCUA_REAL_TIME)
+    if "Scenario" in spec.get("components", {}).get("schemas", {}):
+        for study in found.get("StudySpec", []):
+            tighten_study(spec, study)  # after the bounds above: the grid's values carry them
     return spec

@@ -25,6 +25,8 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from twin.scenario import Int, Num
+
 #: a truncated normal that rejects more than this fraction of draws is refused (bounds far in the tail)
 _MAX_REJECT_ROUNDS = 200
 
@@ -35,8 +37,8 @@ class _Dist(BaseModel):
 
 class Uniform(_Dist):
     dist: Literal["uniform"] = "uniform"
-    low: float
-    high: float
+    low: Num
+    high: Num
 
     @model_validator(mode="after")
     def _bounds(self) -> Uniform:
@@ -50,10 +52,10 @@ class Uniform(_Dist):
 
 class Normal(_Dist):
     dist: Literal["normal"] = "normal"
-    mean: float = 0.0
-    std: float = Field(gt=0.0)
-    low: float | None = Field(None, description="truncate below (resampled)")
-    high: float | None = Field(None, description="truncate above (resampled)")
+    mean: Num = 0.0
+    std: Num = Field(gt=0.0)
+    low: Num | None = Field(None, description="truncate below (resampled)")
+    high: Num | None = Field(None, description="truncate above (resampled)")
 
     @model_validator(mode="after")
     def _bounds(self) -> Normal:
@@ -78,8 +80,8 @@ class Normal(_Dist):
 
 class Integers(_Dist):
     dist: Literal["integers"] = "integers"
-    low: int
-    high: int = Field(description="inclusive")
+    low: Int
+    high: Int = Field(description="inclusive")
 
     @model_validator(mode="after")
     def _bounds(self) -> Integers:

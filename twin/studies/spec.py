@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from twin.limits import ScenarioLimits
-from twin.scenario import Scenario, parse_scenario
+from twin.scenario import Int, Scenario, parse_scenario
 from twin.studies.distributions import Distribution
 
 #: the most cases one study may expand to (a typo like n = 5000000 is refused, not attempted)
@@ -53,8 +53,8 @@ class MonteCarlo(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    n: int = Field(ge=1, le=MAX_CASES, description="number of samples")
-    seed: int = Field(0, ge=0, le=2**32 - 1, description="the study's sampling seed")
+    n: Int = Field(ge=1, le=MAX_CASES, description="number of samples")
+    seed: Int = Field(0, ge=0, le=2**32 - 1, description="the study's sampling seed")
     seeds: Literal["per_sample", "base"] = "per_sample"
     fields: dict[str, Distribution] = Field(default_factory=dict)
 
@@ -64,9 +64,9 @@ class MonteCarlo(BaseModel):
         if not isinstance(data, dict):
             return data
         given = data.get("fields")
-        if given is not None and not isinstance(given, dict):
+        if "fields" in data and not isinstance(given, dict):  # null too: the schema says an object
             raise ValueError("fields: a table of scenario field path -> distribution, "
-                             f"got {type(given).__name__}")
+                             f"got {'null' if given is None else type(given).__name__}")
         fields = dict(given or {})
         fields.update({k: v for k, v in data.items() if k not in MC_KEYWORDS})
         return {**{k: v for k, v in data.items() if k in MC_KEYWORDS}, "fields": fields}
@@ -112,6 +112,11 @@ class StudySpec(BaseModel):
         both = sorted(set(self.grid) & mc_paths)
         if both:
             raise ValueError(f"{', '.join(both)}: given in both [grid] and [monte_carlo]")
+        varied = sorted(set(self.grid) | mc_paths)
+        nested = [(a, b) for a in varied for b in varied if b.startswith(a + ".")]
+        if nested:
+            a, b = nested[0]
+            raise ValueError(f"{a!r} and {b!r}: a field and a field inside it cannot both be varied")
         if self.monte_carlo is not None and self.monte_carlo.seeds == "per_sample" and (
             "seed" in self.grid or "seed" in mc_paths
         ):

@@ -84,7 +84,7 @@ def resume_study(study_id: str, studies: StudiesDep) -> StudySummary:
 
 
 @router.get("/{study_id}/files/{name:path}", response_class=FileResponse,
-            responses={200: {"content": {"application/octet-stream": {}}},
+            responses={200: {"content": {media: {} for media in (*STUDY_FILES.values(), "image/png")}},
                        404: {"description": "no such study or file"}})
 def study_file(study_id: str, name: str, studies: StudiesDep) -> FileResponse:
     """results.parquet, results.csv, study.md, summary.json or figures/<name>.png."""
