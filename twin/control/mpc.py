@@ -177,23 +177,30 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     rows_ff = np.minimum(np.arange(j, end), N - 1)  # plan.sample(j + k): the last input held beyond the plan
     u_ff = plan.u_ff[rows_ff]
     deltas = plan_deltas[rows_ff] if plan_deltas is not None else anti_windup_deltas(u_ff, delta0)
-    Y, yf = np.empty((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
+    Y, yf = np.zeros((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
+    # Only the moves already reached act on d_k: the columns of Gd from the next move on are exact zeros.  The
+    # products take the columns reached (``live``) alone; a product with zero columns is exactly zero, so the QP
+    # is the same to the bit at a third of the products (issue 21).
+    live = 0
     for k0, L, key in _segments(j, end, N, every):
         powers = store.get(key)
         if powers is None:
             Phi, Gam = gains.linearisation(j + k0)
             powers = store[key] = SegmentPowers.of(np.asarray(Phi, float), np.asarray(Gam, float), c, every)
-        Yseg = powers.rows[:L] @ Gd  # (L, nz)
+        Yseg = Y[k0:k0 + L]  # (L, nz), zeros
+        if live:
+            Yseg[:, :live] = powers.rows[:L] @ Gd[:, :live]
         yf[k0:k0 + L] = powers.rows[:L] @ d_free
         for i in range(L - 1):  # the input of step k0 + i reaches the mean of the later steps
             b = block_of[k0 + i]
             Yseg[i + 1:, b * m:(b + 1) * m] += powers.c_gam[:L - 1 - i]
-        Y[k0:k0 + L] = Yseg
-        Gd = powers.Phi_pow[L] @ Gd
+        if live:
+            Gd[:, :live] = powers.Phi_pow[L] @ Gd[:, :live]
         d_free = powers.Phi_pow[L] @ d_free
         for i in range(L):
             b = block_of[k0 + i]
             Gd[:, b * m:(b + 1) * m] += powers.gam_pow[L - 1 - i]
+        live = (int(block_of[k0 + L - 1]) + 1) * m
     # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
     w_int = (deltas * t_s)[:, None]
     GI = np.vstack([np.zeros((1, nz)), np.cumsum(w_int * Y, axis=0)])  # (H + 1, nz)
