@@ -80,13 +80,13 @@ def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str
             setattr(obj, name, _timed(getattr(obj, name), times[label]))
     nested = []
     for label, path, name in NESTED:  # these objects live through a default run (no re-plan replaces them)
-        obj: Any = loop
+        inside: Any = loop
         for attr in path.split("."):
-            obj = getattr(obj, attr, None)
-        if obj is not None and hasattr(obj, name):
+            inside = getattr(inside, attr, None)
+        if inside is not None and hasattr(inside, name):
             times[label] = []
             nested.append(label)
-            setattr(obj, name, _timed(getattr(obj, name), times[label]))
+            setattr(inside, name, _timed(getattr(inside, name), times[label]))
     floor = joint.propagate_covariance
     joint.propagate_covariance = _timed(floor, times[FLOOR])  # type: ignore[assignment]
     condense = mpc.condensed_qp
