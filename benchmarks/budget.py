@@ -1,10 +1,10 @@
 """The budget of a sample: what each part of :meth:`twin.runs.loop.ClosedLoop.step` costs (docs/performance.md).
 
 One default run (240 s, the default furnace, cached tables) is stepped with each part wrapped in a timer;
-the median and the mean per sample are reported per part, with the EKF's covariance propagation
-P = Phi P Phi^T + Q (eq. 15, :func:`twin.estimation.ekf.propagate_covariance`) as the floor: the one piece of
-per-sample work that is O(n^3) and cannot be skipped.  The wrappers add about a microsecond a call; the
-shares, not the absolute figures, are what a loaded machine reports truly.
+the median and the mean per sample are reported per part (indented: parts of those parts), with the EKF's
+covariance propagation P = Phi P Phi^T + Q (eq. 15, :func:`twin.estimation.ekf.propagate_covariance`) as the
+floor: the one piece of per-sample work that is O(n^3) and cannot be skipped.  The wrappers add about a
+microsecond a call; the shares, not the absolute figures, are what a loaded machine reports truly.
 
     python -m benchmarks.budget [--duration S] [--config NAME] [--json]
 """
@@ -40,6 +40,15 @@ PARTS: tuple[tuple[str, str | None, str], ...] = (
     ("fault detection: GLR predict", "detector", "predict"),
 )
 FLOOR = "  of which covariance propagation (15)"
+#: parts inside the parts above (label, dotted owner from the loop, method name): not added to "other"
+NESTED: tuple[tuple[str, str, str], ...] = (
+    ("  of which model evaluate F (14)", "estimator.model", "evaluate"),
+    ("  of which Jacobian Phi (16) assembly", "estimator", "_jacobian"),
+    ("  of which reported P predict (issue 25)", "estimator.reported", "predict"),
+    ("  of which reported P update + NIS", "estimator.reported", "update"),
+    ("  of which MPC QP solve (OSQP)", "controller.solver", "solve"),
+)
+MPC_CONDENSE = "  of which MPC condensing (condensed_qp)"
 
 
 def _timed(fn: Callable[..., Any], into: list[float]) -> Callable[..., Any]:
@@ -56,6 +65,7 @@ def _timed(fn: Callable[..., Any], into: list[float]) -> Callable[..., Any]:
 def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str, dict[str, float]]:
     """``{part: {"median_ms", "mean_ms", "share"}}`` per sample of one default run, with ``"step"`` (the whole
     :meth:`ClosedLoop.step`) and ``"other"`` (step minus the parts); share = mean / mean step."""
+    import twin.control.mpc as mpc
     import twin.estimation.joint as joint
     from twin.runs.loop import ClosedLoop
     from twin.scenario import Scenario
@@ -63,12 +73,24 @@ def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str
     loop = ClosedLoop(cfg, Scenario(duration=duration), radiation)
     times: dict[str, list[float]] = {label: [] for label, _, _ in PARTS}
     times[FLOOR] = []
+    times[MPC_CONDENSE] = []
     for label, owner, name in PARTS:
         obj = getattr(loop, owner) if owner else loop
         if obj is not None and hasattr(obj, name):
             setattr(obj, name, _timed(getattr(obj, name), times[label]))
+    nested = []
+    for label, path, name in NESTED:  # these objects live through a default run (no re-plan replaces them)
+        inside: Any = loop
+        for attr in path.split("."):
+            inside = getattr(inside, attr, None)
+        if inside is not None and hasattr(inside, name):
+            times[label] = []
+            nested.append(label)
+            setattr(inside, name, _timed(getattr(inside, name), times[label]))
     floor = joint.propagate_covariance
     joint.propagate_covariance = _timed(floor, times[FLOOR])  # type: ignore[assignment]
+    condense = mpc.condensed_qp
+    mpc.condensed_qp = _timed(condense, times[MPC_CONDENSE])  # type: ignore[assignment]
     step: list[float] = []
     try:
         while not loop.done:
@@ -77,6 +99,7 @@ def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str
             step.append(time.perf_counter() - t0)
     finally:
         joint.propagate_covariance = floor  # type: ignore[assignment]
+        mpc.condensed_qp = condense  # type: ignore[assignment]
         loop.close()
     n = len(step)
     total = float(np.sum(step))
@@ -89,9 +112,10 @@ def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str
 
     out["step"] = row(step, n)
     parts_sum = 0.0
-    for label in (*[p[0] for p in PARTS], FLOOR):
+    inner = (FLOOR, MPC_CONDENSE, *nested)
+    for label in (*[p[0] for p in PARTS], *inner):
         out[label] = row(times[label], len(times[label]))
-        if label != FLOOR:
+        if label not in inner:
             parts_sum += float(np.sum(times[label]))
     out["other (loop's own work)"] = {"median_ms": float("nan"), "mean_ms": 1e3 * (total - parts_sum) / n,
                                       "share": (total - parts_sum) / total, "calls_per_sample": 1.0}

@@ -248,3 +248,34 @@ def test_the_plans_deltas_made_once_give_the_same_qp(standin, cfg):
                              plan_deltas=deltas)
             for name in ("H", "g", "A", "lba", "uba", "lbx", "ubx"):
                 assert getattr(a.qp, name).tobytes() == getattr(b.qp, name).tobytes(), (j, name)
+
+
+def test_the_qps_shape_kept_between_samples_follows_the_input_weight_and_the_rates(standin, cfg, ramp):
+    """What the QP's shape alone fixes is made once per shape (issue 21): the rate rows (none without rates,
+    +-I between consecutive moves with them) and the input weight r0 |Delta u|^2 summed over each move's samples
+    (the Hessian's difference between two r0), whatever was asked before; and a QP changed by its user does not
+    change the next one."""
+    plan, gains = ramp
+    w = cfg.lqg
+    settings = MPCSettings(horizon=12, moves=4, rate=0.05)
+    e0 = _e0(standin, 0.4, e_I=0.3, seed=3)
+    m = standin.m
+
+    def qp(r0, with_rates):
+        return condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, r0, w.delta0, 40, e0, None, settings, with_rates)
+
+    first = qp(w.r0, True)
+    blocks = first.blocks
+    nz = m * len(blocks)
+    assert qp(w.r0, False).qp.A.shape == (0, nz)
+    rates = qp(w.r0, True).qp.A
+    assert rates.shape == ((len(blocks) - 1) * m, nz)
+    np.testing.assert_array_equal(rates[:m, :2 * m], np.hstack([-np.eye(m), np.eye(m)]))
+    heavier = qp(3.0 * w.r0, True).qp.H
+    expected = np.diag(np.repeat(2.0 * w.r0 * np.asarray(blocks, float), m))
+    np.testing.assert_allclose(heavier - first.qp.H, expected, rtol=1e-9, atol=1e-9 * np.abs(heavier).max())
+    first.qp.H[:] = 0.0
+    first.qp.A[:] = 0.0
+    again = qp(w.r0, True).qp
+    np.testing.assert_array_equal(again.A, rates)
+    assert np.abs(again.H).max() > 0.0

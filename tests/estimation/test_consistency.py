@@ -4,6 +4,7 @@ filter (twin.estimation.consistency, twin.estimation.process_noise)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from twin.estimation.consistency import cell_nees, chi2_interval, coverage, nees
 from twin.estimation.ekf import EKFState, ekf_update
@@ -153,3 +154,35 @@ def test_consider_states_make_the_reported_covariance_consistent_under_fixed_sen
     assert np.mean(without[20:] > hi) > 0.9, without
     with_bias = _simulate_biased(True, seed=21)
     assert np.sum((with_bias < lo) | (with_bias > hi)) <= 2, with_bias
+
+
+def test_reported_nis_and_consider_update_with_every_reading_and_with_one_missing() -> None:
+    """The reported NIS is nu^T S_a^-1 nu / p with S_a = C_a P C_a^T + R over the readings used, and the
+    consider states' update stays finite when a reading is missing (its deviation is not carried that sample):
+    the update's fast path (all readings used, issue 21) and its general path against the formulas written out."""
+    rng = np.random.default_rng(5)
+    F = rng.normal(size=(3, 3))
+    P = F @ F.T + np.eye(3)
+    L = 0.5 * P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    fixed = 1.5  # K, the tolerance below 375 C (thermocouple_tolerance)
+    Pa = np.zeros((5, 5))
+    Pa[:3, :3], Pa[3:, 3:] = P, np.eye(2) / 3.0
+    Ca = np.concatenate([C, fixed * np.eye(2)], axis=1)
+    nu = np.array([0.3, -0.2])
+    rep = ReportedCovariance(P, np.zeros((3, 3)), readings=2, tc_tolerance=(fixed, 0.0))
+    rep.update(L, C, R, nu, np.array([True, True]), np.array([300.0, 301.0]))
+    S = Ca @ Pa @ Ca.T + R
+    assert rep.nis == pytest.approx(float(nu @ np.linalg.inv(S) @ nu) / 2, rel=1e-12)
+    La = np.concatenate([L, np.zeros((2, 2))])
+    I_LC = np.eye(5) - La @ Ca
+    np.testing.assert_allclose(rep.P, I_LC @ Pa @ I_LC.T + La @ R @ La.T, rtol=1e-12, atol=1e-14)
+    # the second TC missing: the gain's column for it is zero, its deviation drops out of C_a this sample
+    one = ReportedCovariance(P, np.zeros((3, 3)), readings=2, tc_tolerance=(fixed, 0.0))
+    L1 = L.copy()
+    L1[:, 1] = 0.0
+    one.update(L1, C, R, np.array([0.3, np.nan]), np.array([True, False]), np.array([300.0, np.nan]))
+    C1 = Ca.copy()
+    C1[1, 4] = 0.0
+    S1 = C1 @ Pa @ C1.T + R
+    assert one.nis == pytest.approx(0.3**2 / S1[0, 0], rel=1e-12)
+    assert np.all(np.isfinite(one.P))

@@ -143,3 +143,20 @@ def test_consider_states_keep_their_value_and_the_joseph_covariance() -> None:
     # that knew the last two exactly
     full, _ = ekf_update(EKFState(x, P), y, C, R, np.inf)
     assert np.allclose(full.theta[:3], got.theta[:3], atol=1e-12)
+
+
+@pytest.mark.parametrize("heat_capacity", ["constant", "temperature"])
+def test_the_kept_jacobian_follows_the_position(tables, heat_capacity) -> None:
+    """Phi (16) is assembled from per-position pieces and kept while nothing changed (issue 21); a move of the
+    specimen within one table interval changes only the weights, and Phi must follow them: against the exact
+    Jacobian of the model at the new position (float32, so 1e-5 of its largest entry)."""
+    model = ParametricModel(tables, OSC, motion="position_aware", heat_capacity=heat_capacity)
+    est = JointEstimator(model, CFG, 300.0)
+    theta = np.linspace(500.0, 900.0, tables.n)
+    u, p = np.full(6, 0.6), Parameters()
+    eta = np.asarray(tables.eta_nodes, float)
+    for where in (0.2, 0.7, 0.7, 0.2):  # two table positions, other weights, kept (a hit), then back
+        at = float(eta[1] + where * (eta[2] - eta[1]))
+        Phi = est._jacobian(model.evaluate(theta, u, at, p), at, p)
+        exact = model.jac_theta(theta, u, at, p)
+        np.testing.assert_allclose(Phi, exact, rtol=0, atol=1e-5 * np.abs(exact).max())

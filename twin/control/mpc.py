@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -147,6 +148,28 @@ def _segments(j: int, end: int, N: int, every: int) -> list[tuple[int, int, int]
     return out
 
 
+@lru_cache(maxsize=256)
+def _structure(blocks: tuple[int, ...], m: int, r0: float, n_rates: int) -> tuple[tuple[int, ...], Array, Array,
+                                                                                 NDArray[np.intp]]:
+    """What the QP's shape alone fixes (made once per shape, not per sample; read-only): the move of each step,
+    the input weight's part of the Hessian (r0 |Delta u|^2 over each move's samples), the rate rows and the
+    first step of each move."""
+    nz = m * len(blocks)
+    block_of = tuple(int(b) for b in np.repeat(np.arange(len(blocks)), blocks))
+    Hess = np.zeros((nz, nz))
+    eye_m = np.eye(m)
+    for b, length in enumerate(blocks):
+        Hess[b * m:(b + 1) * m, b * m:(b + 1) * m] += r0 * length * eye_m
+    A = np.zeros((n_rates * m, nz))
+    for b in range(1, n_rates + 1):  # u of move b minus u of move b - 1, within the rate bound
+        A[(b - 1) * m:b * m, b * m:(b + 1) * m] = eye_m
+        A[(b - 1) * m:b * m, (b - 1) * m:b * m] = -eye_m
+    starts = np.cumsum([0, *blocks[:-1]])
+    for a in (Hess, A, starts):
+        a.flags.writeable = False
+    return block_of, Hess, A, starts
+
+
 def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1: float, r0: float,
                  delta0: float, j: int, e0: Array, u_prev: Array | None, s: MPCSettings,
                  with_rates: bool = True, cache: dict[int, SegmentPowers] | None = None,
@@ -163,37 +186,42 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     blocks = move_blocks(H, s.moves)
     m = plan.u_ff.shape[1]
     nz = m * len(blocks)
-    block_of = np.repeat(np.arange(len(blocks)), blocks)  # the move of each step
+    n_rates = len(blocks) - 1 if with_rates else 0
+    block_of, Hess0, A0, starts = _structure(tuple(blocks), m, float(r0), n_rates)
     store = {} if cache is None else cache
     # x_k = x_free_k + G_k z, split into the nodes (d) and the integral (I)
     d_free = e0[:n].copy()
     Gd = np.zeros((n, nz))
-    Hess = np.zeros((nz, nz))
-    eye_m = np.eye(m)
-    for b, length in enumerate(blocks):
-        Hess[b * m:(b + 1) * m, b * m:(b + 1) * m] += r0 * length * eye_m
+    Hess = Hess0.copy()
     c = np.asarray(c_m, float)
     t_s = plan.t_s
     rows_ff = np.minimum(np.arange(j, end), N - 1)  # plan.sample(j + k): the last input held beyond the plan
     u_ff = plan.u_ff[rows_ff]
     deltas = plan_deltas[rows_ff] if plan_deltas is not None else anti_windup_deltas(u_ff, delta0)
-    Y, yf = np.empty((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
+    Y, yf = np.zeros((H, nz)), np.empty(H)  # the fillet mean's response c^T d_k before each step k
+    # Only the moves already reached act on d_k: the columns of Gd from the next move on are exact zeros.  The
+    # products take the columns reached (``live``) alone; a product with zero columns is exactly zero, so the QP
+    # is the same to the bit at a third of the products (issue 21).
+    live = 0
     for k0, L, key in _segments(j, end, N, every):
         powers = store.get(key)
         if powers is None:
             Phi, Gam = gains.linearisation(j + k0)
             powers = store[key] = SegmentPowers.of(np.asarray(Phi, float), np.asarray(Gam, float), c, every)
-        Yseg = powers.rows[:L] @ Gd  # (L, nz)
+        Yseg = Y[k0:k0 + L]  # (L, nz), zeros
+        if live:
+            Yseg[:, :live] = powers.rows[:L] @ Gd[:, :live]
         yf[k0:k0 + L] = powers.rows[:L] @ d_free
         for i in range(L - 1):  # the input of step k0 + i reaches the mean of the later steps
             b = block_of[k0 + i]
             Yseg[i + 1:, b * m:(b + 1) * m] += powers.c_gam[:L - 1 - i]
-        Y[k0:k0 + L] = Yseg
-        Gd = powers.Phi_pow[L] @ Gd
+        if live:
+            Gd[:, :live] = powers.Phi_pow[L] @ Gd[:, :live]
         d_free = powers.Phi_pow[L] @ d_free
         for i in range(L):
             b = block_of[k0 + i]
             Gd[:, b * m:(b + 1) * m] += powers.gam_pow[L - 1 - i]
+        live = (block_of[k0 + L - 1] + 1) * m
     # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
     w_int = (deltas * t_s)[:, None]
     GI = np.vstack([np.zeros((1, nz)), np.cumsum(w_int * Y, axis=0)])  # (H + 1, nz)
@@ -209,17 +237,12 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     Hess += G_full.T @ PT @ G_full
     grad += G_full.T @ (PT @ x_free)
     # bounds per move: u in [0, 1] at every sample it is held
-    starts = np.cumsum([0, *blocks[:-1]])
     lbx = np.maximum.reduceat(-u_ff, starts, axis=0).ravel()  # per move: max(-u_ff), min(1 - u_ff) of its samples
     ubx = np.minimum.reduceat(1.0 - u_ff, starts, axis=0).ravel()
     if u_prev is not None:  # the first move's rate, as bounds (always feasible: u_prev is in [0, 1])
         lbx[:m] = np.maximum(lbx[:m], u_prev - s.rate - u_ff[0])
         ubx[:m] = np.minimum(ubx[:m], u_prev + s.rate - u_ff[0])
-    n_rates = len(blocks) - 1 if with_rates else 0
-    A = np.zeros((n_rates * m, nz))
-    for b in range(1, n_rates + 1):  # u of move b minus u of move b - 1, within the rate bound
-        A[(b - 1) * m:b * m, b * m:(b + 1) * m] = eye_m
-        A[(b - 1) * m:b * m, (b - 1) * m:b * m] = -eye_m
+    A = A0.copy()
     jump = (u_ff[starts[1:]] - u_ff[starts[1:] - 1])[:n_rates].ravel()
     qp = QP(H=0.5 * (Hess + Hess.T), g=grad, A=A, lba=-s.rate - jump, uba=s.rate - jump, lbx=lbx,
             ubx=np.maximum(ubx, lbx))

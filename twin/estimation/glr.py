@@ -93,11 +93,25 @@ class SignatureBanks:
         self._lamp = np.array([k == "lamp" for k in kinds])
         self._common = np.array([k == "common" for k in kinds])
         self._capacity = np.array([k == "capacity" for k in kinds])
+        self._layouts: dict[int, _Layout] = {}  # per number of banks (issue 21: made once, not per sample)
         self._onsets: list[int] = []
         self._j = -1  # the last updated sample
         self._s = np.zeros((n, 0))  # (n, banks * H), bank-major
         self._A = np.zeros(0)
         self._B = np.zeros(0)
+
+    def _layout(self, nb: int) -> _Layout:
+        """The columns of each kind of hypothesis over ``nb`` banks (they depend on nb alone)."""
+        lay = self._layouts.get(nb)
+        if lay is None:
+            sens = np.flatnonzero(np.tile(self._sensor, nb))
+            cols = np.tile(self.columns, nb)
+            lamp = np.flatnonzero(np.tile(self._lamp, nb))
+            lay = self._layouts[nb] = _Layout(
+                sensor=sens, sensor_rows=cols[sens], sensor_drift=np.tile(self._drift, nb)[sens],
+                lamp=lamp, lamp_groups=cols[lamp], common=np.flatnonzero(np.tile(self._common, nb)),
+                capacity=np.flatnonzero(np.tile(self._capacity, nb)))
+        return lay
 
     def reset(self) -> None:
         """Forget every bank (after a decision the filter's configuration changed)."""
@@ -133,12 +147,9 @@ class SignatureBanks:
             return
         H, nb = self.H, len(self._onsets)
         a = np.zeros((self.p, nb * H))
-        ages = j - np.repeat(np.asarray(self._onsets), H)
-        sens = np.tile(self._sensor, nb)
-        ramp = np.where(np.tile(self._drift, nb), ages * self.t_s, 1.0)
-        cols = np.tile(self.columns, nb)
-        idx = np.flatnonzero(sens)
-        a[cols[idx], idx] = ramp[idx]
+        lay = self._layout(nb)
+        ages = j - np.repeat(np.asarray(self._onsets), H)[lay.sensor]
+        a[lay.sensor_rows, lay.sensor] = np.where(lay.sensor_drift, ages * self.t_s, 1.0)
         sigma = a - C @ self._s  # (p, nb H)
         obs = tested & np.isfinite(nu)
         if obs.any():
@@ -157,15 +168,13 @@ class SignatureBanks:
         if not self._onsets:
             return
         self._s = Phi @ self._s
-        nb = len(self._onsets)
-        lamp = np.flatnonzero(np.tile(self._lamp, nb))
+        lay = self._layout(len(self._onsets))
+        lamp, common, capacity = lay.lamp, lay.common, lay.capacity
         if lamp.size:
-            g = np.tile(self.columns, nb)[lamp]
+            g = lay.lamp_groups
             self._s[:, lamp] += Gamma[:, g] * np.asarray(u, float)[g]
-        common = np.flatnonzero(np.tile(self._common, nb))
         if common.size:
             self._s[:, common] += (Gamma @ np.asarray(u, float))[:, None]
-        capacity = np.flatnonzero(np.tile(self._capacity, nb))
         if capacity.size and increment is not None:
             self._s[:, capacity] += np.asarray(increment, float)[:, None]
 
@@ -195,6 +204,20 @@ class SignatureBanks:
             return None
         k, h = np.unravel_index(int(np.argmax(eligible)), eligible.shape)
         return tab.candidate(int(k), int(h), tab.llr)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Columns (bank-major) of the sensor hypotheses with their TC rows and drift flags, of the lamp hypotheses
+    with their groups, of the common and capacity hypotheses, over a number of banks."""
+
+    sensor: NDArray[np.intp]
+    sensor_rows: NDArray[np.intp]
+    sensor_drift: NDArray[np.bool_]
+    lamp: NDArray[np.intp]
+    lamp_groups: NDArray[np.intp]
+    common: NDArray[np.intp]
+    capacity: NDArray[np.intp]
 
 
 @dataclass(frozen=True)

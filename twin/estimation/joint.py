@@ -106,7 +106,8 @@ class JointEstimator:
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))
         self._rad: dict[int, tuple[Array, float, Array]] = {}  # id(node) -> (theta, p_e, t_s A diag(4T^3) M)
         # the assembled theta part of Phi, reused while no piece was rebuilt and the positions' weights are the
-        # same (the averaged model, a fixed specimen): (version of the pieces, weights, J in the covariance dtype)
+        # same (the averaged model, a fixed specimen): (version of the pieces, weights, J: in the covariance dtype
+        # for a constant capacity, else the float64 sum the capacity scaling of each sample is applied to)
         self._pieces_version = 0
         self._assembled: tuple[int, tuple[float, ...], NDArray[Any]] | None = None
         #: dF/dp of the last prediction (n, k), the upper right block of Phi_x (16); zeros before the first
@@ -214,14 +215,17 @@ class JointEstimator:
             pieces.append((w, cached[2]))
         weights = tuple(float(w) for w, _ in pieces)
         hit = self._assembled
-        if e.capacity is None and hit is not None and hit[0] == self._pieces_version and hit[1] == weights:
-            J = hit[2]  # nothing changed since the last sample: the same sum (0.08 ms per sample saved)
+        if hit is not None and hit[0] == self._pieces_version and hit[1] == weights:
+            J0 = hit[2]  # nothing changed since the last sample: the same sum (0.08 ms per sample saved)
         else:
-            J = self._lin[1].copy()
+            J0 = self._lin[1].copy()
             for w, piece in pieces:
-                J += w * piece
-            J = model.with_capacity(J, e).astype(self._cov_dtype, copy=False)
-            self._assembled = (self._pieces_version, weights, J) if e.capacity is None else None
+                J0 += w * piece
+            if e.capacity is None:
+                J0 = J0.astype(self._cov_dtype, copy=False)
+            self._assembled = (self._pieces_version, weights, J0)
+        # with c_p(theta) the capacity scaling moves every sample; the constant-capacity sum J0 it scales is kept
+        J = J0 if e.capacity is None else model.with_capacity(J0, e).astype(self._cov_dtype, copy=False)
         if not k:
             return J
         Phi = np.zeros((n + k, n + k), dtype=self._cov_dtype)

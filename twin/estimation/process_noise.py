@@ -98,7 +98,8 @@ class ReportedCovariance:
         if self.P.shape[0] == m:
             self.P = propagate_covariance(Phi, self.P, self.Q)
             return
-        P = self.P.copy()
+        P = np.empty_like(self.P)  # every block is written below
+        P[m:, m:] = self.P[m:, m:]
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
         P[m:, :m] = P[:m, m:].T
@@ -112,20 +113,27 @@ class ReportedCovariance:
         if b:
             if readings is None:
                 raise ValueError("the TCs' deviations are carried: update needs the readings")
-            tol = np.nan_to_num(tolerance(readings, *self.tc_tolerance or (0.0, 0.0)), nan=0.0)
+            tol = tolerance(readings, *self.tc_tolerance or (0.0, 0.0))
+            if not np.isfinite(tol).all():  # a missing reading: no deviation to carry
+                tol = np.nan_to_num(tol, nan=0.0)
             C = np.concatenate([C, np.diag(tol)], axis=1)
             gain = np.concatenate([gain, np.zeros((b, gain.shape[1]))], axis=0)
         PCt = self.P @ C.T
         S = C @ PCt + R
-        if used.any():
+        if used.all():  # the normal case: no fancy indexing (it costs more than the algebra at p = 3)
+            self.nis = float(innovation @ np.linalg.solve(S, innovation)) / len(used)
+        elif used.any():
             nu, Su = innovation[used], S[np.ix_(used, used)]
             self.nis = float(nu @ np.linalg.solve(Su, nu)) / int(used.sum())
         else:
             self.nis = float("nan")
             return
-        # (I - L C) P (I - L C)^T + L R L^T = P - L PCt^T - PCt L^T + L S L^T
-        LS = gain @ S
-        P = self.P - gain @ PCt.T - PCt @ gain.T + LS @ gain.T
+        # (I - L C) P (I - L C)^T + L R L^T = P - L PCt^T - PCt L^T + L S L^T; PCt L^T is (L PCt^T)^T to the
+        # bit (each entry the same p products summed in the same order), so it is formed once
+        LPCt = gain @ PCt.T
+        P = self.P - LPCt
+        P -= LPCt.T
+        P += (gain @ S) @ gain.T
         P += P.T
         P *= 0.5
         self.P = P

@@ -28,6 +28,7 @@ Example
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -93,9 +94,9 @@ class Fillet:
         """The weights in the state order k = i + N_x j, (N_s,)."""
         return self.weights.ravel()
 
-    @property
+    @cached_property
     def flat_indices(self) -> NDArray[np.intp]:
-        """State indices of the cells of :attr:`mask`."""
+        """State indices of the cells of :attr:`mask` (found once: T_sup asks twice per sample)."""
         return np.flatnonzero(self.mask.ravel())
 
     def _grid(self, field: ArrayLike) -> Array:
