@@ -166,10 +166,8 @@ def run_campaign_group(
     out = [first]
     for task, place in zip(tasks[1:], others, strict=True):
         log.info("campaign: %s, seed %d: TC4 at %s of the shared run", task.name, task.seed, place.scenario.tc4)
-        # the model's open-loop error reads the run's inputs and true field only: the shared run's; no series
-        # parts before the end (the samples are in memory already: parts would be written, then removed)
-        out.append(_execute(task, place, tables, sinks, model_error=first["model_error"],
-                            flush_every_s=place.scenario.duration + place.t_s))
+        # the model's open-loop error reads the run's inputs and true field only: the shared run's
+        out.append(_execute(task, place, tables, sinks, model_error=first["model_error"]))
     return out
 
 
@@ -197,7 +195,7 @@ def _run_alone(task: CampaignRun, scenario: Any, tables: tuple[FurnaceConfig, An
 
 
 def _execute(task: CampaignRun, loop: Any, tables: tuple[FurnaceConfig, Any, Any], sinks: list[Any], *,
-             model_error: dict[str, Any] | None = None, flush_every_s: float = 10.0) -> dict[str, Any]:
+             model_error: dict[str, Any] | None = None) -> dict[str, Any]:
     """A loop (a ``ClosedLoop`` or a TC4 place's) run to its end into the task's folder; the run's result."""
     from twin.experiments.model_error import open_loop_model_error
     from twin.experiments.run import execute_run
@@ -207,11 +205,10 @@ def _execute(task: CampaignRun, loop: Any, tables: tuple[FurnaceConfig, Any, Any
     if task.ship:
         with tempfile.TemporaryDirectory(prefix="furnace-twin-campaign-") as tmp:
             folder = Path(tmp) / Path(task.folder).name  # the same name: a sink may name its file after it
-            result = execute_run(loop, folder, sink_factories=sinks, figures=task.figures, flush_every_s=flush_every_s)
+            result = execute_run(loop, folder, sink_factories=sinks, figures=task.figures)
             files = {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
     else:
-        result = execute_run(loop, Path(task.folder), sink_factories=sinks, figures=task.figures,
-                             flush_every_s=flush_every_s)
+        result = execute_run(loop, Path(task.folder), sink_factories=sinks, figures=task.figures)
         files = None
     ts = loop.timeseries()
     return {
