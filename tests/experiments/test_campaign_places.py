@@ -58,16 +58,19 @@ def _task(tmp: Path, name: str, scenario: Scenario) -> CampaignRun:
                        own_truth=True, figures=False)
 
 
-def test_a_shared_loop_writes_each_place_as_its_run_alone(tmp_path, small_radiation, small_truth_radiation):
+@pytest.mark.parametrize("estimator", [{}, {"estimator": {"shadow": {"motion": "averaged", "calibrate": False}}}],
+                         ids=["default", "with-shadow"])
+def test_a_shared_loop_writes_each_place_as_its_run_alone(tmp_path, small_radiation, small_truth_radiation,
+                                                           estimator):
     """Three TC4 places as one loop (run_campaign_group) against each place's run alone (the campaign's code
-    before): every array of each run's record (TC4's readings, statuses and estimate at its place; the header's
-    positions and scenario) and every metric equal, bit for bit.  Catches a place given the shared run's TC4
-    estimate or positions, another TC's noise, a header left at the first place."""
+    before): every array of each run's record (TC4's readings, statuses and estimate at its place, a shadow
+    estimator's too; the header's positions and scenario) and every metric equal, bit for bit.  Catches a place
+    given the shared run's TC4 estimate or positions, another TC's noise, a header left at the first place."""
     cfg = small_config()
     local = (cfg, small_radiation, small_truth_radiation)
     plans: dict[Any, Any] = {}
-    tasks = [_task(tmp_path / "shared", f"fixed_tc4_{p[0]:g}", _scenario(p)) for p in PLACES]
-    alone = [_task(tmp_path / "alone", f"fixed_tc4_{p[0]:g}", _scenario(p)) for p in PLACES]
+    tasks = [_task(tmp_path / "shared", f"fixed_tc4_{p[0]:g}", _scenario(p, **estimator)) for p in PLACES]
+    alone = [_task(tmp_path / "alone", f"fixed_tc4_{p[0]:g}", _scenario(p, **estimator)) for p in PLACES]
     got = run_campaign_group(tasks, local=local, plan_cache=plans)
     want = [run_campaign_run(t, local=local, plan_cache=plans) for t in alone]
     tc4 = []
