@@ -30,7 +30,7 @@ import dataclasses
 from collections.abc import Sequence
 from concurrent.futures import Future
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -206,3 +206,9 @@ class PlaceLoop:
 
     def close(self) -> None:
         self._snapshots = []
+
+
+if TYPE_CHECKING:  # mypy holds a place to what a run session asks of a loop
+    from twin.runs.interface import Loop
+
+    _A_PLACE_IS_A_LOOP: type[Loop] = PlaceLoop
