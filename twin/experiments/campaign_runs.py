@@ -13,7 +13,8 @@ A worker never ray-traces: it loads the furnace's tables from its radiation cach
 are there first, :func:`ensure_tables`) and keeps them for all its runs (:func:`furnace_tables`); a worker
 whose cache lacks them fails its runs with a message that says what to do.  The initial plans are shared
 between the runs of one worker process as the serial campaign shares them (``ClosedLoop(plan_cache=...)``), and
-the runs that share a plan go to one worker together (:func:`group_by_plan`).
+the runs that share a plan go to one worker together (:func:`group_by_plan`), where the runs that differ only in
+TC4's place are one closed loop (:func:`run_campaign_group`, :mod:`twin.experiments.campaign_places`).
 """
 
 from __future__ import annotations
