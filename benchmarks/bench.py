@@ -18,7 +18,7 @@
 | stream_clients, stream_fps_min | clients served at once (20) at 20 frames/s; the slowest one's frames/s |
 | stream_latency_p95_ms | p95 latency from sample to frame, while 2 runs go at speed max (benchmarks.stream) |
 | rss_growth_mb | server memory growth over a 1 h run (simulated) at speed max; long_run_rtf: its speed |
-| campaign_wall_s | wall s of `campaign --seeds 2` (12 runs and their figures, tables cached), one worker per core |
+| campaign_wall_s | wall s of `campaign --seeds 2` (12 runs, 4 loops, figures; tables cached), one worker per core |
 
 ``bench --hil [--duration S]`` measures hardware-in-the-loop timing instead (:mod:`benchmarks.hil`).
 

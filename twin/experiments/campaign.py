@@ -194,7 +194,7 @@ def run_campaign(
     on where the runs went.  Raises :class:`twin.studies.cluster.ClusterError` when the cluster cannot be
     started or reached.
     """
-    from twin.experiments.campaign_runs import CampaignRun, run_campaign_run
+    from twin.experiments.campaign_runs import CampaignRun, group_by_plan, run_campaign_group
     from twin.experiments.figures import plot_homogeneity_comparison
 
     if seeds < 1:
@@ -236,8 +236,9 @@ def run_campaign(
         if truth == "independent":
             own = truth_radiation if truth_radiation is not None else load_truth_radiation(cfg)
         plan_cache: dict[Any, Any] = {}
-        runs = [run_campaign_run(t, sink_factories=sinks, local=(cfg, rad, own), plan_cache=plan_cache)
-                for t in tasks]
+        done = {(r["name"], r["seed"]): r for group in group_by_plan(tasks)  # a group: one loop, its TC4 places
+                for r in run_campaign_group(group, sink_factories=sinks, local=(cfg, rad, own), plan_cache=plan_cache)}
+        runs = [done[(t.name, t.seed)] for t in tasks]
     else:
         runs = _on_cluster(cfg, tasks, sinks, truth == "independent", client, workers, scheduler)
     experiments: list[dict[str, Any]] = []

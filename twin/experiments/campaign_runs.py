@@ -13,7 +13,8 @@ A worker never ray-traces: it loads the furnace's tables from its radiation cach
 are there first, :func:`ensure_tables`) and keeps them for all its runs (:func:`furnace_tables`); a worker
 whose cache lacks them fails its runs with a message that says what to do.  The initial plans are shared
 between the runs of one worker process as the serial campaign shares them (``ClosedLoop(plan_cache=...)``), and
-the runs that share a plan go to one worker together (:func:`group_by_plan`).
+the runs that share a plan go to one worker together (:func:`group_by_plan`), where the runs that differ only in
+TC4's place are one closed loop (:func:`run_campaign_group`, :mod:`twin.experiments.campaign_places`).
 """
 
 from __future__ import annotations
@@ -121,29 +122,87 @@ def run_campaign_run(
     ``task.keep_series``).  In this process ``local`` is (config, radiation, truth radiation) and
     ``plan_cache`` the campaign's; on a worker they come from the worker's own caches.  A run that fails raises,
     as in the serial campaign."""
-    from twin.control.budget import BATCH_MAX_WALL_S, PlanBudget
-    from twin.experiments.model_error import open_loop_model_error
-    from twin.experiments.run import execute_run
-    from twin.furnace.simulated import SimulatedFurnace
-    from twin.jsonable import jsonable
+    return run_campaign_group([task], furnace, sink_factories, local=local, plan_cache=plan_cache)[0]
+
+
+def run_campaign_group(
+    tasks: list[CampaignRun],
+    furnace: dict[str, Any] | None = None,
+    sink_factories: Iterable[SinkFactory] = (),
+    *,
+    local: tuple[FurnaceConfig, Any, Any] | None = None,
+    plan_cache: dict[Any, Any] | None = None,
+) -> list[dict[str, Any]]:
+    """Run campaign runs to their end, as :func:`run_campaign_run` each, in the order of ``tasks``.  Runs that
+    differ only in TC4's place (one specimen mode and seed, :func:`twin.experiments.campaign_places.shares_loop`)
+    are one closed loop, its samples written into each place's folder with TC4 there; otherwise (or if the
+    shared run did something its places cannot replay) each run has its own loop."""
+    from twin.experiments.campaign_places import SharedRunRefused, TC4Places, shares_loop
     from twin.limits import scenario_limits
-    from twin.runs.loop import ClosedLoop
     from twin.scenario import Scenario
 
     if local is None:
         if furnace is None:
             raise ValueError("run_campaign_run needs the furnace (a worker) or local tables (in process)")
-        cfg, rad, own = furnace_tables(task.furnace_digest, furnace, task.own_truth)
-        plans = _PLANS.setdefault(task.furnace_digest, {})
+        cfg, rad, own = furnace_tables(tasks[0].furnace_digest, furnace, tasks[0].own_truth)
+        plans = _PLANS.setdefault(tasks[0].furnace_digest, {})
     else:
         cfg, rad, own = local
         plans = plan_cache if plan_cache is not None else {}
-    scenario = Scenario.model_validate_json(task.scenario_json, context={"limits": scenario_limits(cfg)})
+    tables = (cfg, rad, own)
+    scenarios = [Scenario.model_validate_json(t.scenario_json, context={"limits": scenario_limits(cfg)})
+                 for t in tasks]
+    sinks = list(sink_factories)
+    if len(tasks) == 1 or not shares_loop(scenarios):
+        return [_run_alone(t, s, tables, plans, sinks) for t, s in zip(tasks, scenarios, strict=True)]
+    places = TC4Places(cfg, scenarios[1:])
+    loop = _closed_loop(tasks[0], scenarios[0], tables, plans, places)
+    first = _execute(tasks[0], loop, tables, [*sinks, places.sink])
+    try:
+        others = places.loops()
+    except SharedRunRefused as exc:
+        log.info("campaign: %s, seed %d: the TC4 places run alone (%s)", tasks[0].name, tasks[0].seed, exc)
+        return [first, *(_run_alone(t, s, tables, plans, sinks) for t, s in zip(tasks[1:], scenarios[1:],
+                                                                                 strict=True))]
+    out = [first]
+    for task, place in zip(tasks[1:], others, strict=True):
+        log.info("campaign: %s, seed %d: TC4 at %s of the shared run", task.name, task.seed, place.scenario.tc4)
+        # the model's open-loop error reads the run's inputs and true field only: the shared run's
+        out.append(_execute(task, place, tables, sinks, model_error=first["model_error"]))
+    return out
+
+
+def _closed_loop(task: CampaignRun, scenario: Any, tables: tuple[FurnaceConfig, Any, Any], plans: dict[Any, Any],
+                 places: Any = None) -> Any:
+    """The simulated furnace and the closed loop of a run (with ``places``: TC4 read at its places too)."""
+    from twin.control.budget import BATCH_MAX_WALL_S, PlanBudget
+    from twin.furnace.simulated import SimulatedFurnace
+    from twin.runs.loop import ClosedLoop
+
+    cfg, rad, own = tables
     log.info("campaign: %s, seed %d (truth %s)", task.name, task.seed, scenario.truth)
     sim = SimulatedFurnace.for_scenario(cfg, scenario, rad, truth_radiation=own if scenario.truth == "independent"
-                                        else None)
-    loop = ClosedLoop(cfg, scenario, rad, furnace=sim, plan_cache=plans, budget=PlanBudget(BATCH_MAX_WALL_S))
-    sinks = list(sink_factories)
+                                        else None, other_tc4=() if places is None else places.places)
+    loop = ClosedLoop(cfg, scenario, rad, furnace=sim, plan_cache=plans, budget=PlanBudget(BATCH_MAX_WALL_S),
+                      on_estimate=None if places is None else places.on_estimate)
+    if places is not None:
+        places.attach(loop)
+    return loop
+
+
+def _run_alone(task: CampaignRun, scenario: Any, tables: tuple[FurnaceConfig, Any, Any], plans: dict[Any, Any],
+               sinks: list[Any]) -> dict[str, Any]:
+    return _execute(task, _closed_loop(task, scenario, tables, plans), tables, sinks)
+
+
+def _execute(task: CampaignRun, loop: Any, tables: tuple[FurnaceConfig, Any, Any], sinks: list[Any], *,
+             model_error: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A loop (a ``ClosedLoop`` or a TC4 place's) run to its end into the task's folder; the run's result."""
+    from twin.experiments.model_error import open_loop_model_error
+    from twin.experiments.run import execute_run
+    from twin.jsonable import jsonable
+
+    cfg, rad, _own = tables
     if task.ship:
         with tempfile.TemporaryDirectory(prefix="furnace-twin-campaign-") as tmp:
             folder = Path(tmp) / Path(task.folder).name  # the same name: a sink may name its file after it
@@ -157,7 +216,7 @@ def run_campaign_run(
         "name": task.name,
         "seed": task.seed,
         "metrics": jsonable({k: v for k, v in result.items() if k not in ("out", "status", "status_reason")}),
-        "model_error": jsonable(open_loop_model_error(cfg, ts, rad)),
+        "model_error": model_error if model_error is not None else jsonable(open_loop_model_error(cfg, ts, rad)),
         "out": task.folder,
         "files": files,
         "series": ts if task.keep_series else None,
@@ -166,9 +225,10 @@ def run_campaign_run(
 
 def run_campaign_runs(tasks: list[CampaignRun], furnace: dict[str, Any], sink_factories: Iterable[SinkFactory] = (),
                       ) -> list[dict[str, Any]]:
-    """Several runs one after another on one worker (:func:`group_by_plan`: runs that share their initial plan,
-    which is about half the cost of a short run, so only the first of them pays for it)."""
-    return [run_campaign_run(t, furnace, sink_factories) for t in tasks]
+    """The runs of one group (:func:`group_by_plan`) on one worker: one closed loop for their TC4 places
+    (:func:`run_campaign_group`); runs that cannot share it share at least their initial plan, about half the
+    cost of a short run."""
+    return run_campaign_group(tasks, furnace, sink_factories)
 
 
 def group_by_plan(tasks: list[CampaignRun]) -> list[list[CampaignRun]]:

@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future
 from pathlib import Path
 from typing import Any, cast
@@ -96,6 +96,9 @@ class ClosedLoop:
         (same oscillation, reference and initial estimate) is solved once.
     budget : wall time, memory and cancellation of every plan of the run (:mod:`twin.control.budget`);
         the first plan uses it, each re-plan a child of it.  ``None``: no estimate, IPOPT's own limits.
+    on_estimate : called at each sample with the estimates (primary, shadow or None) after the measurement
+        update, before anything else uses them (the campaign reads them at its other TC4 places,
+        :mod:`twin.experiments.campaign_places`); it must not change them.
     """
 
     def __init__(
@@ -108,6 +111,7 @@ class ClosedLoop:
         background: bool = False,
         plan_cache: dict[Any, Plan] | None = None,
         budget: PlanBudget | None = None,
+        on_estimate: Callable[[np.ndarray, np.ndarray | None], None] | None = None,
     ) -> None:
         from twin.control.mpc import make_controller
         from twin.estimation.fault_detection import FaultDetector
@@ -180,6 +184,7 @@ class ClosedLoop:
         #: wall time of estimator + controller per sample (ms), for the benchmark
         self.compute_ms: list[float] = []
         self._series: SeriesStore | None = None  # the parts append_series writes
+        self._on_estimate = on_estimate
 
     # ------------------------------------------------------------------ the loop
     @property
@@ -226,6 +231,8 @@ class ClosedLoop:
             theta_prior = self.estimator.state.theta.copy()
             holding = t >= changes.reference.t_end  # the reference holds still
             theta, shadow = self.estimators.update(y, learn=holding)  # eq. 13 (faulty readings gated inside)
+            if self._on_estimate is not None:
+                self._on_estimate(theta, shadow)
             info = self.estimator.last_info
             used = info is not None and bool(np.any(info.used))  # blind: no TC reading reached the estimate
             why = "" if used else blind_cause(readings.status, self.detector.excluded, info)

@@ -63,6 +63,9 @@ class SimulatedFurnace:
     T0 : initial cell temperatures (K); default the configured uniform initial temperature
     truth : the furnace's latent heat, TC and lamp dynamics (``None``: the model's c_p, ideal TCs and lamps)
     faults : faults injected at run time (:mod:`twin.furnace.simulated.faults`)
+    other_tc4 : further relative places of TC4, read beside it (:meth:`other_tc4_readings`): each as TC4
+        would read there in a run of its own, so one run serves the campaign's TC4 places (TC4 only validates:
+        the twin never uses it, :data:`twin.furnace.interface.N_ESTIMATOR_TCS`)
     """
 
     kind = "simulated"
@@ -81,6 +84,7 @@ class SimulatedFurnace:
         T0: ArrayLike | None = None,
         truth: Truth | None = None,
         faults: Sequence[FaultSpec] = (),
+        other_tc4: Sequence[tuple[float, float]] = (),
     ) -> None:
         self.cfg = cfg
         self.truth = truth
@@ -101,19 +105,22 @@ class SimulatedFurnace:
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
         self.faults = FaultInjector(tuple(g.name for g in cfg.lamps.groups), faults)
-        self._last_read: tuple[float, Readings] | None = None  # (plant time, readings): a repeated read of
-        # the same sample gives the same readings
+        self._others = [_OtherTC4(cfg, place, self._state.T, truth, seed, self.faults) for place in other_tc4]
+        # (plant time, readings, the other TC4 places' readings): a repeated read of the same sample gives the same
+        self._last_read: tuple[float, Readings, tuple[Readings, ...]] | None = None
 
     @classmethod
     def for_scenario(cls, cfg: FurnaceConfig, scenario: Scenario, radiation: Any, *,
-                     truth_radiation: Any = None) -> SimulatedFurnace:
-        """The furnace of a scenario: its truth, mismatch, TC4, TC noise, seed, initial oscillation and faults.
+                     truth_radiation: Any = None, other_tc4: Sequence[tuple[float, float]] = ()) -> SimulatedFurnace:
+        """The furnace of a scenario: its truth, mismatch, TC4, TC noise, seed, initial oscillation and faults
+        (and ``other_tc4``: TC4 read at these places too, :meth:`other_tc4_readings`).
 
         ``radiation`` is the twin's model (the plant's tables when the scenario's truth is ``"shared"``);
         ``truth_radiation`` the furnace's own table, read from the cache if not given and needed.
         """
         common: dict[str, Any] = {"tc4": scenario.tc4, "tc_noise": scenario.tc_noise, "seed": scenario.seed,
-                                  "oscillation": scenario.oscillation, "faults": scenario.faults}
+                                  "oscillation": scenario.oscillation, "faults": scenario.faults,
+                                  "other_tc4": other_tc4}
         if scenario.truth == "shared":
             return cls(cfg, radiation, mismatch=scenario.mismatch, **common)
         truth = Truth.of(cfg, truth_radiation)
@@ -145,16 +152,26 @@ class SimulatedFurnace:
         self._check_time(t, "read")
         if self._last_read is not None and self._last_read[0] == self._state.t:
             return self._last_read[1]
-        if self._sensors is None:
-            values = self.thermocouples.read(self._state.T, self._rng, self._tc_noise)
-        else:
-            values = self._sensors.values()
-            if self._tc_noise > 0.0:
-                values = values + self._tc_noise * self._rng.standard_normal(values.shape)
-        values, status = self.faults.readings(t, values)
-        readings = Readings(values=values, timestamps=np.full(len(values), float(t)), status=status)
-        self._last_read = (self._state.t, readings)
+        T = self._state.T
+        clean = self.thermocouples.true_values(T) if self._sensors is None else self._sensors.values()
+        # one draw for TC1..TC4; the other TC4 places take TC4's, as TC4 there would have had it in its own run
+        draw = self._rng.standard_normal(clean.shape) if self._tc_noise > 0.0 else None
+        readings = self._readings(t, clean, draw, self.faults)
+        others = tuple(self._readings(t, o.clean(T), draw, o.faults) for o in self._others)
+        self._last_read = (self._state.t, readings, others)
         return readings
+
+    def _readings(self, t: float, clean: Array, draw: Array | None, faults: FaultInjector) -> Readings:
+        values = clean if draw is None else clean + self._tc_noise * draw
+        values, status = faults.readings(t, values)
+        return Readings(values=values, timestamps=np.full(len(values), float(t)), status=status)
+
+    def other_tc4_readings(self, t: float) -> tuple[Readings, ...]:
+        """TC1..TC4 of sample t with TC4 at each ``other_tc4`` place (TC1..TC3 as :meth:`read`): what a run of
+        this furnace with TC4 there reads (the same noise draw, bias, lag and injected faults as TC4's)."""
+        self.read(t)
+        assert self._last_read is not None
+        return self._last_read[2]
 
     def apply(self, u: Array, t: float) -> None:
         """Hold u over [t, t + t_s]: the plant moves on by one sample (inputs clipped to [0, 1]; a failed or
@@ -168,12 +185,15 @@ class SimulatedFurnace:
         self._state = self.plant.advance(self._state, power, self.t_s, self._eta_of_t)
         if self._sensors is not None:
             self._sensors.advance(self._state.T, self.t_s)
+        for other in self._others:
+            other.advance(self._state.T, self.t_s)
 
     # ---- fault injection (twin.furnace.interface.FaultInjectable)
     def set_faults(self, faults: Sequence[FaultSpec], t: float) -> None:
         """Replace the injected faults from run time t on (their ``at`` counted from t; empty clears them); a
         reading of the current sample taken before is read again with them."""
-        self.faults.schedule(faults, t)
+        for injector in (self.faults, *(o.faults for o in self._others)):
+            injector.schedule(faults, t)
         self._last_read = None
 
     def faults_in_force(self) -> list[FaultSpec]:
@@ -199,3 +219,23 @@ class SimulatedFurnace:
 
     def close(self) -> None:
         return None
+
+
+class _OtherTC4:
+    """TC1..TC4 with TC4 at another place: its own interpolation rows, lag and bias (the run's seed: the same
+    biases as the furnace's own TCs) and fault injector; the noise comes from the furnace's draw."""
+
+    def __init__(self, cfg: FurnaceConfig, place: tuple[float, float], T0: Array, truth: Truth | None, seed: int,
+                 faults: FaultInjector) -> None:
+        self.thermocouples = Thermocouples(cfg, cfg.tc_positions(place))
+        self.sensors = None if truth is None else LaggedThermocouples(
+            self.thermocouples, T0, seed=seed, time_constant=truth.tc_time_constant, bias=truth.tc_bias)
+        self.faults = FaultInjector(faults.groups, faults.faults)
+
+    def clean(self, T: Array) -> Array:
+        """The readings before noise and faults (K)."""
+        return self.thermocouples.true_values(T) if self.sensors is None else self.sensors.values()
+
+    def advance(self, T: Array, h: float) -> None:
+        if self.sensors is not None:
+            self.sensors.advance(T, h)
