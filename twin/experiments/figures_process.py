@@ -13,8 +13,9 @@ before.  ``--no-figures`` skips the process and the figures (scripts that only w
 
 The child is a fresh interpreter (``python -m twin.experiments.figures_process``, talking over its stdin and
 stdout), not a fork: the parent may hold threads (rerun's, a re-planner's) that a fork would copy in an
-unknown state, and unlike ``multiprocessing``'s spawn it does not re-run the caller's main script.  The
-child ignores Ctrl-C (the parent ends it), so an interrupted run prints no traceback of it.
+unknown state, and unlike ``multiprocessing``'s spawn it does not re-run the caller's main script.  It runs in
+a session of its own and ignores SIGINT: Ctrl-C at the terminal is the parent's, which ends it (closing its
+stdin), so an interrupted run prints no traceback of it; a parent that dies closes that pipe as well.
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ class FigureProcess:
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)}
         self._child = subprocess.Popen(
             [sys.executable, "-m", "twin.experiments.figures_process"], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, text=True, env=env,
+            stdout=subprocess.PIPE, text=True, env=env, start_new_session=True,  # Ctrl-C at the terminal: the parent's
         )
 
     def draw(self, out: Path, timeout: float = DRAW_TIMEOUT_S) -> list[Path]:
