@@ -1,4 +1,4 @@
-"""``python -m benchmarks.run_budget``: the wall budget of one ``furnace-twin run`` times every part it names."""
+"""``python scripts/run_budget.py``: the wall budget of one ``furnace-twin run`` times every part it names."""
 
 from __future__ import annotations
 
@@ -7,8 +7,11 @@ import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 from twin.config import small_config_toml
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_the_budget_of_a_small_run_times_each_part(tmp_path, small_radiation, small_truth_radiation) -> None:
@@ -17,8 +20,8 @@ def test_the_budget_of_a_small_run_times_each_part(tmp_path, small_radiation, sm
     sc = tmp_path / "scenario.json"
     sc.write_text(json.dumps({"reference": {"setpoint": 600.0, "t_E": 4.0}, "duration": 8.0}))  # 81 samples
     done = subprocess.run(
-        [sys.executable, "-m", "benchmarks.run_budget", "--config", str(cfg), "run", "--scenario", str(sc), "--out",
-         str(tmp_path / "out"), "--json"], capture_output=True, text=True, check=True,
+        [sys.executable, str(REPO / "scripts" / "run_budget.py"), "--config", str(cfg), "run", "--scenario", str(sc),
+         "--out", str(tmp_path / "out"), "--json"], capture_output=True, text=True, check=True,
         env={**os.environ, "FURNACE_TWIN_DATA_DIR": str(tmp_path / "data")},
     )
     rows = {}

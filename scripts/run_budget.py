@@ -1,7 +1,8 @@
 """The wall budget of one ``furnace-twin run``: where a user's wait goes (issue 21, ``docs/performance.md``).
 
-``python -m benchmarks.run_budget [furnace-twin arguments]`` (default: ``run --out <tmp> --json``, the default
-240 s run) runs the command in this process with a timer around each part (imports, tables, the simulated
+``python scripts/run_budget.py [furnace-twin arguments]`` (default: ``run --out <tmp> --json``, the default
+240 s run) runs the command of the checkout the script is in (``python <checkout>/scripts/run_budget.py`` for
+another, e.g. a ``git archive`` of main) in this process with a timer around each part (imports, tables, the simulated
 furnace, the first plan, the loop's steps, the rerun recording, the series' flushes, the final
 ``timeseries.npz``, the figures) and prints a markdown table: wall seconds, calls, share of the command.  The
 command's own output goes to stderr.  Parts nest (the plan is inside building the loop, the recording's
@@ -10,15 +11,17 @@ command's own output goes to stderr.  Parts nest (the plan is inside building th
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 _T0 = time.perf_counter()
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, before an installed one
 
 import contextlib  # noqa: E402
 import functools  # noqa: E402
 import importlib  # noqa: E402
 import importlib.util  # noqa: E402
-import sys  # noqa: E402
 import tempfile  # noqa: E402
 from collections.abc import Callable, Sequence  # noqa: E402
 from typing import Any  # noqa: E402
