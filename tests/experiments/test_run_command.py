@@ -140,3 +140,15 @@ def test_a_run_does_not_import_matplotlib_or_scipy_stats() -> None:
             "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'scipy.stats'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_a_figure_process_that_cannot_start_leaves_the_figures_to_the_run(small_run, monkeypatch, caplog) -> None:
+    """No interpreter to start (an OSError from Popen): the run draws its figures itself, after its data."""
+
+    def no_process(*args, **kwargs):
+        raise OSError("no such interpreter (test)")
+
+    monkeypatch.setattr(figures_process.subprocess, "Popen", no_process)
+    status, out = small_run()
+    assert status == 0 and "no figure process" in caplog.text
+    assert (out / "signals.png").read_bytes().startswith(PNG) and (out / "field.png").read_bytes().startswith(PNG)

@@ -84,12 +84,24 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         return 2
     out = Path(args.out)
     log.info("run: %s -> %s", scenario.to_json(), out)
-    with FigureProcess() if getattr(args, "figures", True) else contextlib.nullcontext() as figure_process:
-        return _run(cfg, args, scenario, out, sink_factories, figure_process)
+    figures = bool(getattr(args, "figures", True))
+    with _figure_process(figures) as figure_process:
+        return _run(cfg, args, scenario, out, sink_factories, figures, figure_process)
+
+
+def _figure_process(figures: bool) -> contextlib.AbstractContextManager[FigureProcess | None]:
+    """The run's figure process, started now (:mod:`twin.experiments.figures_process`); none without figures, or
+    if it cannot be started (then the figures are drawn in this process, after the data, as before)."""
+    if figures:
+        try:
+            return FigureProcess()
+        except OSError as exc:
+            log.warning("no figure process (%s): the figures will be drawn in this process", exc)
+    return contextlib.nullcontext()
 
 
 def _run(cfg: FurnaceConfig, args: Any, scenario: Any, out: Path, sink_factories: Iterable[SinkFactory],
-         figure_process: FigureProcess | None) -> int:
+         figures: bool, figure_process: FigureProcess | None) -> int:
     from twin.furnace.connect import open_furnace
     from twin.radiation import radiation_model
 
@@ -109,8 +121,7 @@ def _run(cfg: FurnaceConfig, args: Any, scenario: Any, out: Path, sink_factories
         furnace.close()
         raise
     try:
-        result = execute_run(loop, out, sink_factories=sink_factories, figures=figure_process is not None,
-                             figure_process=figure_process)
+        result = execute_run(loop, out, sink_factories=sink_factories, figures=figures, figure_process=figure_process)
     except EstimateDiverged as exc:  # the loop switched the lamps off; the data up to it is in `out`
         print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
         return 1
