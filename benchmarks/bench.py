@@ -114,10 +114,15 @@ def plant_rtf(cfg: FurnaceConfig, radiation: Any, duration: float = 240.0) -> fl
     return duration / wall
 
 
+#: What one ``furnace-twin run`` leaves in its folder (product.md): the data, the recording and the figures.
+RUN_FILES = ("metrics.json", "timeseries.npz", "recording.rrd", "signals.png", "field.png")
+
+
 def run_wall_seconds(config: str | None = None, repeats: int = 3, duration: float | None = None) -> float:
     """Median wall time (s) of ``repeats`` ``furnace-twin run`` commands of the furnace ``config`` (the default
     scenario: 240 s; or one of ``duration`` s), each a fresh process as a user starts it: imports, model, plan,
-    loop, files, figures.  The tables must be cached (:func:`run_bench` loads both first); a failed run raises."""
+    loop, files, figures.  The tables must be cached (:func:`run_bench` loads both first); a failed run, or one
+    that did not write all of :data:`RUN_FILES` (its figures are drawn by a child process it waits for), raises."""
     walls = []
     with tempfile.TemporaryDirectory(prefix="furnace-twin-bench-run-") as d:
         scenario: list[str] = []
@@ -133,6 +138,9 @@ def run_wall_seconds(config: str | None = None, repeats: int = 3, duration: floa
             walls.append(time.perf_counter() - t0)
             if done.returncode != 0:
                 raise RuntimeError(f"{' '.join(cmd)} failed ({done.returncode}): {done.stderr[-2000:]}")
+            missing = [f for f in RUN_FILES if not os.path.isfile(os.path.join(d, f"run-{i}", f))]
+            if missing:  # a command that left out part of a run is not what a user waits for
+                raise RuntimeError(f"{' '.join(cmd)} did not write {', '.join(missing)}")
     log.info("run_wall_s: %s", ", ".join(f"{w:.2f}" for w in walls))
     return float(np.median(walls))
 

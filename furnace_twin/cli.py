@@ -84,6 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--tc4", type=_rel_point, default=None)
     s.add_argument("--out", default="out/run")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    s.add_argument("--no-figures", dest="figures", action="store_false",
+                   help="only the data (metrics.json, timeseries.npz, recording.rrd): no signals.png, field.png")
 
     s = sub.add_parser("campaign", help="the paper's six experiments, several seeds each, and a comparison table")
     s.add_argument("--out", default="out/campaign")

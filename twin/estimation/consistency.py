@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 Array = NDArray[np.float64]
 
@@ -37,6 +36,8 @@ def nees(error: ArrayLike, P: ArrayLike) -> float:
 
 def chi2_interval(dof: int, runs: int, probability: float = 0.95) -> tuple[float, float]:
     """Two-sided ``probability`` region of the mean of ``runs`` independent chi-square(dof) values."""
+    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.6 s to import and a run never asks
+
     a = (1.0 - probability) / 2.0
     n = dof * runs
     return float(chi2.ppf(a, n) / runs), float(chi2.ppf(1.0 - a, n) / runs)

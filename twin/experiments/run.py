@@ -1,10 +1,12 @@
 """Headless closed-loop runs: ``furnace-twin run`` (product.md).
 
-A run writes ``metrics.json``, ``timeseries.npz``, PNG figures and, when a sink
+A run writes ``metrics.json``, ``timeseries.npz``, PNG figures (not with ``--no-figures``) and, when a sink
 factory is given by the composition root (``furnace_twin/cli.py`` passes the rerun
 recorder from ``backend``), ``recording.rrd``.  ``twin`` itself never imports
 rerun.  The time series is flushed every ``flush_every_s`` simulated seconds and
-on stop or error, so a crash loses at most those seconds.
+on stop or error, so a crash loses at most those seconds.  The figures are drawn after the data is written,
+by a child process started with the command (:mod:`twin.experiments.figures_process`: matplotlib's import
+overlaps the run); the command returns when they are there.
 
 A scenario whose ``plant`` is a furnace over OPC UA runs against it in real time (the furnace's clock
 paces the loop), with the link settings of ``FURNACE_TWIN_OPCUA_*`` and certificates under
@@ -16,6 +18,7 @@ ended (``status``, ``status_reason``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -25,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.config import FurnaceConfig
+from twin.experiments.figures_process import FigureProcess
 from twin.jsonable import jsonable
 from twin.limits import furnace_name, scenario_limits
 from twin.runs.folder import RunFolder
@@ -45,21 +49,28 @@ def execute_run(
     *,
     sink_factories: Iterable[SinkFactory] = (),
     figures: bool = True,
+    figure_process: FigureProcess | None = None,
     flush_every_s: float = 10.0,
 ) -> dict[str, Any]:
     """Run a loop to the end in ``out`` (``twin.runs.session.RunSession.run``: its data written as it goes) and
     plot its figures; returns the metrics with ``out``, ``status`` and ``status_reason`` (also in
     ``metrics.json``: ``finished``, ``degraded`` when it ended blind, ``plant_lost`` with ``error`` if the furnace
     was lost; the data up to then is written all the same).  A run that fails (the estimate diverged, ...) or is
-    interrupted (Ctrl-C) writes its data and ``metrics.json`` with status ``error`` / ``stopped``, then raises."""
+    interrupted (Ctrl-C) writes its data and ``metrics.json`` with status ``error`` / ``stopped``, then raises.
+
+    The figures are drawn after ``timeseries.npz`` and ``metrics.json`` are written: by ``figure_process`` if
+    given (``furnace-twin run``), else here (the campaign's workers, which may not start processes)."""
     folder = RunFolder(out)
     session = RunSession(loop, folder, sinks=[make(out, loop) for make in sink_factories])
     result = session.run(flush_every_s=flush_every_s)
     if figures and session.latest is not None:
-        from twin.experiments.figures import plot_run
-        from twin.runs.record import load_arrays
+        if figure_process is not None:
+            figure_process.draw(out)
+        else:
+            from twin.experiments.figures import plot_run
+            from twin.runs.record import load_arrays
 
-        plot_run(load_arrays(folder.timeseries), out)
+            plot_run(load_arrays(folder.timeseries), out)
     return {**result, "out": str(out)}
 
 
@@ -73,6 +84,24 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         return 2
     out = Path(args.out)
     log.info("run: %s -> %s", scenario.to_json(), out)
+    figures = bool(getattr(args, "figures", True))
+    with _figure_process(figures) as figure_process:
+        return _run(cfg, args, scenario, out, sink_factories, figures, figure_process)
+
+
+def _figure_process(figures: bool) -> contextlib.AbstractContextManager[FigureProcess | None]:
+    """The run's figure process, started now (:mod:`twin.experiments.figures_process`); none without figures, or
+    if it cannot be started (then the figures are drawn in this process, after the data, as before)."""
+    if figures:
+        try:
+            return FigureProcess()
+        except OSError as exc:
+            log.warning("no figure process (%s): the figures will be drawn in this process", exc)
+    return contextlib.nullcontext()
+
+
+def _run(cfg: FurnaceConfig, args: Any, scenario: Any, out: Path, sink_factories: Iterable[SinkFactory],
+         figures: bool, figure_process: FigureProcess | None) -> int:
     from twin.furnace.connect import open_furnace
     from twin.radiation import radiation_model
 
@@ -92,7 +121,7 @@ def run_command(cfg: FurnaceConfig, args: Any, sink_factories: Iterable[SinkFact
         furnace.close()
         raise
     try:
-        result = execute_run(loop, out, sink_factories=sink_factories)
+        result = execute_run(loop, out, sink_factories=sink_factories, figures=figures, figure_process=figure_process)
     except EstimateDiverged as exc:  # the loop switched the lamps off; the data up to it is in `out`
         print(f"furnace-twin run: stopped: {exc} (data so far in {out})", file=sys.stderr)  # noqa: T201
         return 1
