@@ -113,9 +113,7 @@ def create_app(
         manager = RunManager(settings, cfg, repo, loop_factory, limits=limits,
                              event_loop=asyncio.get_running_loop())
         await asyncio.to_thread(manager.disk.apply_retention, repo, settings.runs_dir)
-        warm_up = getattr(manager.loop_factory, "start_warm_up", None)
-        if callable(warm_up):  # the radiation model loads in the background; the server answers meanwhile
-            warm_up(cfg)
+        manager.loop_factory.start_warm_up(cfg)  # the radiation model loads in the background; the server answers
         app.state.manager = manager
         app.state.studies = StudyManager(settings, cfg, study_runner, furnace_name=limits.furnace)
         app.state.viser_url = None

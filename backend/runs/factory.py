@@ -41,6 +41,9 @@ class LoopFactory:
         """Where the model's warm-up stands (``backend.runs.loop_factory.WarmUpStatus``); ``None``: no warm-up."""
         return None
 
+    def start_warm_up(self, cfg: FurnaceConfig) -> None:
+        """Begin loading the furnace's model in the background (the server answers meanwhile); none by default."""
+
     def retry_warm_up(self, cfg: FurnaceConfig) -> bool:
         """Start a failed warm-up again; False (nothing done) unless it failed: a factory without one never fails."""
         return False
