@@ -107,3 +107,29 @@ def test_a_dead_first_channel_does_not_stop_the_run_clock() -> None:
     publish(buf, 3, channels=(1,))
     got = buf.take(1, now=Clock(10.36))
     assert got[0] is None and got[1] is not None and got[1].value == 303.0
+
+
+
+@pytest.mark.parametrize("relearn", [True, False])
+def test_a_new_connection_is_on_time_from_its_first_reading(relearn: bool) -> None:
+    """A reconnection subscribes anew, and its readings wait for the server's publishing cycle in another phase:
+    here 0.08 s after the sample instead of 0.003 s (open62541 publishes every 100 ms; late_s is 0.05 s).  With
+    the buffer told (``relearn``, as the OPC UA furnace does at the first reading of a new connection) each
+    sample's deadline is after its readings' arrival at once; without it the old delays in the window (100
+    readings: 2 s at a furnace's five channels) put the deadline before the arrival, so every sample of those
+    2 s was missing: the o6 restart test found readings used again 2.5 s after the link returned."""
+    buf = anchored()
+    for j in range(1, 40):  # the first connection, 4 s
+        publish(buf, j + 2)
+        assert None not in buf.take(j, now=Clock(10.0 + (j + 2) * T_S + 0.003))
+    if relearn:
+        buf.relearn()
+    on_time = []
+    for j in range(40, 70):  # the second connection: later in each period
+        publish(buf, j + 2, delay=0.08)
+        on_time.append(10.0 + (j + 2) * T_S + 0.08 <= buf.due(j) + buf.late_s)
+        buf.take(j, now=Clock(10.0 + (j + 2) * T_S + 0.08))
+    if relearn:
+        assert all(on_time)
+    else:  # late while any of the first connection's delays is in the window (100 readings: 50 samples here)
+        assert not any(on_time)

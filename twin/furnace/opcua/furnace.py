@@ -109,7 +109,8 @@ class OpcUaFurnace:
         self._buffer = SampleBuffer(self.t_s, len(CHANNELS), late_s=options.late_fraction * self.t_s)
         self._io = _IoThread(f"opcua-{endpoint}")
         self._link = FurnaceLink(LinkSettings(endpoint, options, Path(cert_dir), self.node_map, CHANNELS,
-                                              watched=(names.LAMPS_ENABLED,)), self._buffer.add, self._on_state)
+                                              watched=(names.LAMPS_ENABLED,)), self._reading, self._on_state)
+        self._reading_connection = -math.inf  # the connection (its connected_since) the last reading came on
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta = 0.0
@@ -227,6 +228,16 @@ class OpcUaFurnace:
             self._events.append(f"the twin caught up with the furnace at t = {t:.1f} s after {self._behind} "
                                 f"samples late ({self.overdue_samples} in this run)")
             self._behind = 0
+
+    def _reading(self, channel: int, value: float, good: bool, source_s: float, arrival: float) -> None:
+        """A reading into the sample buffer (the OPC UA thread); the first after a reconnection has the buffer
+        learn the new subscription's arrival delays (:meth:`SampleBuffer.relearn`)."""
+        connection = self._link.connected_since
+        if connection != self._reading_connection:
+            if self._reading_connection > -math.inf:
+                self._buffer.relearn()
+            self._reading_connection = connection
+        self._buffer.add(channel, value, good, source_s, arrival)
 
     def _on_state(self, name: str, value: Any, good: bool, source_s: float) -> None:
         """``LampsEnabled`` as the furnace reports it (the OPC UA thread): its interlock turning the lamps off

@@ -76,6 +76,7 @@ class SampleBuffer:
         self._newest: list[Reading | None] = [None] * self.n
         self._delays: deque[float] = deque(maxlen=delay_window)  # arrival - (source - origin), all channels
         self._taken = -1  # the last sample handed out
+        self._relearn = False  # the next reading filed starts the arrival delays anew (see relearn)
         self.last_arrival = -math.inf
         self.dropped_late = 0  # readings that came after their sample was handed out (or far ahead)
         self.overdue_s = 0.0  # how long after its deadline the last sample was taken (0: in time)
@@ -96,6 +97,9 @@ class SampleBuffer:
         assert self._origin is not None
         rel = r.source_s - self._origin
         k = round(rel / self.t_s)
+        if self._relearn:
+            self._delays.clear()
+            self._relearn = False
         self._delays.append(r.arrival - rel)
         if k <= self._taken or k > self._taken + 1000:
             self.dropped_late += 1
@@ -128,11 +132,22 @@ class SampleBuffer:
             self._slots.clear()
             self._delays.clear()
             self._delays.append(r0.arrival)
+            self._relearn = False
             self._taken = -1
             self.dropped_late = 0
             self._slots[0] = [r if r is not None and abs(r.source_s - r0.source_s) <= 0.5 * self.t_s else None
                               for r in self._newest]
             return r0
+
+    def relearn(self) -> None:
+        """The readings come over a new connection: learn when samples are due from them alone.
+
+        The arrival delay includes the wait for the server's next publishing cycle (up to its interval, 100 ms on
+        open62541), whose phase against the furnace's sampling is new with every subscription.  A delay learnt
+        on the old connection can make every sample of the new one late until it leaves the window (2 s at
+        five channels and 10 Hz); the samples keep their pace on the old delays until the first new reading."""
+        with self._cond:
+            self._relearn = True
 
     @property
     def origin(self) -> float | None:
