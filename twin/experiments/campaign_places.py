@@ -42,7 +42,7 @@ from twin.furnace.simulated.thermocouples import Thermocouples
 from twin.runs.loop import ClosedLoop
 from twin.runs.outage import run_ending
 from twin.runs.record import RunRecord, Snapshot
-from twin.runs.series_store import SeriesStore, parts_dir
+from twin.runs.series_store import SeriesStore, append_series
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 Array = NDArray[np.float64]
@@ -188,9 +188,7 @@ class PlaceLoop:
 
     def append_series(self, folder: Path) -> None:
         """As ``ClosedLoop.append_series``."""
-        if self._series is None or self._series.dir != parts_dir(Path(folder)):
-            self._series = SeriesStore(Path(folder))
-        self._series.append(self.record)
+        self._series = append_series(self._series, folder, self.record)
 
     def _no_changes(self) -> Any:
         raise ValueError("a TC4 place of a shared campaign run replays it: it takes no live changes")

@@ -76,7 +76,7 @@ from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.live_changes import LiveChanges, Plan
 from twin.runs.outage import BlindWatch, blind_cause, run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot
-from twin.runs.series_store import SeriesStore, parts_dir
+from twin.runs.series_store import SeriesStore, append_series
 from twin.scenario import FaultSpec, OscillationSpec, Reference, Scenario
 
 __all__ = ["ClosedLoop", "Snapshot"]
@@ -321,9 +321,7 @@ class ClosedLoop:
 
     def append_series(self, folder: Path) -> None:
         """Append the samples since the last call to the series parts in ``folder`` (``twin.runs.series_store``)."""
-        if self._series is None or self._series.dir != parts_dir(Path(folder)):
-            self._series = SeriesStore(Path(folder))
-        self._series.append(self.record)
+        self._series = append_series(self._series, folder, self.record)
 
     def set_reference(self, spec: Reference) -> Future[float]:
         """New reference from now on (times of a points reference count from now); re-plans.

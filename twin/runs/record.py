@@ -345,6 +345,12 @@ class RunRecord:
 NPZ_COMPRESSLEVEL = 1
 
 
+def write_npy_member(zf: zipfile.ZipFile, name: str, value: Any, *, allow_pickle: bool = False) -> None:
+    """``value`` as the member ``name.npy`` of an open ``.npz`` (zip) file, as ``np.savez`` writes it."""
+    with zf.open(f"{name}.npy", mode="w", force_zip64=True) as member:
+        np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=allow_pickle)
+
+
 def save_arrays(path: str | os.PathLike[str], arrays: Mapping[str, Any], *, compress: bool = True) -> None:
     """Write a time series atomically (tmp file, fsync, rename): a reader or a crash never sees half a file.
 
@@ -360,8 +366,7 @@ def save_arrays(path: str | os.PathLike[str], arrays: Mapping[str, Any], *, comp
         with zipfile.ZipFile(fh, mode="w", compression=method, allowZip64=True,
                              compresslevel=NPZ_COMPRESSLEVEL if compress else None) as zf:
             for k, v in arrays.items():
-                with zf.open(f"{k}.npy", mode="w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(v), allow_pickle=True)  # as np.savez
+                write_npy_member(zf, k, v, allow_pickle=True)  # as np.savez
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, p)

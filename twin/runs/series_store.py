@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.runs.record import RunRecord, load_arrays, save_arrays
+from twin.runs.record import RunRecord, load_arrays, save_arrays, write_npy_member
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +89,15 @@ class SeriesStore:
     def _save(self, path: Path, arrays: dict[str, Any]) -> None:
         save_arrays(path, arrays, compress=False)
         self.bytes_written += path.stat().st_size
+
+
+def append_series(store: SeriesStore | None, folder: Path, record: RunRecord) -> SeriesStore:
+    """Append ``record``'s samples since the last call to the parts in ``folder``: with ``store`` if it writes
+    there, else with a new one; returns the store to keep for the next call (a loop's ``append_series``)."""
+    if store is None or store.dir != parts_dir(Path(folder)):
+        store = SeriesStore(Path(folder))
+    store.append(record)
+    return store
 
 
 def has_parts(folder: Path) -> bool:
@@ -155,10 +164,10 @@ def write_parts(folder: Path, path: Path) -> None:
             with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
                 for name, value in header.items():
                     if name not in order:
-                        _write_member(zf, name, value)
+                        write_npy_member(zf, name, value)
                 for name in order:
                     if name in memory:
-                        _write_member(zf, name, np.concatenate(memory.pop(name)))
+                        write_npy_member(zf, name, np.concatenate(memory.pop(name)))
                         continue
                     file, dtype, row, rows = raw[name]
                     with zf.open(name + ".npy", mode="w", force_zip64=True) as member:
@@ -173,11 +182,6 @@ def write_parts(folder: Path, path: Path) -> None:
     finally:
         shutil.rmtree(raw_dir, ignore_errors=True)
         tmp.unlink(missing_ok=True)
-
-
-def _write_member(zf: zipfile.ZipFile, name: str, value: Any) -> None:
-    with zf.open(name + ".npy", mode="w", force_zip64=True) as member:
-        np.lib.format.write_array(member, np.asarray(value), allow_pickle=False)
 
 
 def consolidate(folder: Path, path: Path, *, load: bool = True) -> dict[str, Any]:
