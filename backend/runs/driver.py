@@ -47,6 +47,9 @@ class ActiveRun:
     executor: concurrent.futures.ThreadPoolExecutor
     wake: asyncio.Event
     status: str = "queued"
+    #: why it ended (``twin.runs.outage.run_ending``), set with its final status: a request that sees the final
+    #: status while the run is still being let go reads the reason here, as the database may not hold it yet
+    ending_reason: str | None = None
     task: asyncio.Task[None] | None = None
     published_seq: int = -1
     sent_events: int = 0  # events of the worker's list already sent in frames
@@ -163,7 +166,7 @@ class RunDriver:
             except Exception:
                 log.exception("run %s: finalising failed", run_id)
             final, reason = w.ending or (final, error)  # a run that finished blind ended degraded
-            run.status = final
+            run.status, run.ending_reason = final, reason
             self._repo.set_status(run_id, final, error=error, reason=reason)
             if w.latest is not None:
                 run.hub.publish(self._frame(run_id, run, w.latest, w.seq, w.latest_wall, final))

@@ -280,6 +280,11 @@ class RunManager:
         run = self._runs.get(run_id)
         return None if run is None else run.status
 
+    def ending_reason(self, run_id: str) -> str | None:
+        """Why a run this server drives ended, once it has (its status final, the run not yet let go); else ``None``."""
+        run = self._runs.get(run_id)
+        return None if run is None else run.ending_reason
+
     def live_runs(self) -> list[str]:
         """Ids of the runs this server drives (queued, starting, running), newest first."""
         return sorted(self._runs, key=lambda k: self._runs[k].started_monotonic, reverse=True)

@@ -10,6 +10,7 @@ out.  A failing run uses the stand-in loop (one that raises); the furnace lost o
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 
@@ -98,3 +99,46 @@ def test_stopped_and_failed_runs_say_so(tmp_path, small_cfg) -> None:
     assert _metrics(tmp_path, failing)["status"] == "error"
     assert stopped["status_reason"].startswith("stopped at t = ")
     assert _metrics(tmp_path, stopping)["status_reason"] == stopped["status_reason"]
+
+
+def test_a_run_being_let_go_says_why_it_ended(tmp_path) -> None:
+    """Between the driver setting a run's final status and letting the run go, a request sees the live status:
+    its reason must be the ending's, which the database may not hold yet (the suite under load once read
+    ``finished`` with ``status_reason`` null in test_a_run_whose_readings_came_back_...).  A going run that is
+    degraded says since when it is blind; a run the server does not drive, the database's reason."""
+    from backend.api.routes.runs import summary
+    from backend.storage.repository import RunRow
+    from twin.runs.folder import RunFolder
+
+    class Manager:  # what summary asks of the run manager, for one run
+        live_url = None
+
+        def __init__(self, status, ending_reason, blind_since=None) -> None:
+            self._status, self._ending, self._blind = status, ending_reason, blind_since
+
+        def status(self, run_id):
+            return self._status
+
+        def ending_reason(self, run_id):
+            return self._ending
+
+        def latest(self, run_id):
+            class Sample:
+                snapshot = type("Snap", (), {"blind_since": self._blind})()
+            return Sample() if self._blind is not None else None
+
+        def files(self, run_id):
+            return RunFolder(tmp_path / run_id)
+
+        def changes(self, run_id):
+            return []
+
+    row = RunRow(id="r1", scenario={}, status="running", created_at=0.0, started_at=0.0, ended_at=None,
+                 latest=None, metrics=None, error=None)  # read before the ending reached the database
+    ended = summary(row, Manager("finished", "blind once, 3.0 s in all: 2.0-5.0 s (the TCs report faults)"))
+    assert (ended.status, ended.status_reason) == ("finished", "blind once, 3.0 s in all: 2.0-5.0 s (the TCs "
+                                                               "report faults)")
+    blind = summary(row, Manager("degraded", None, blind_since=2.0))
+    assert blind.status_reason == "blind since t = 2.0 s: no thermocouple reading reaches the estimate"
+    stored = dataclasses.replace(row, status="finished", status_reason="blind once, ...")
+    assert summary(stored, Manager(None, None)).status_reason == "blind once, ..."

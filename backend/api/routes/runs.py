@@ -57,7 +57,12 @@ def scenario_summary(scenario: dict[str, Any]) -> dict[str, Any]:
 
 
 def live_reason(manager: RunManager, run_id: str, state: str) -> str | None:
-    """Why a going run is degraded: since when no thermocouple reading reaches its estimate."""
+    """Why a run this server drives is in ``state``: why it ended, once it has (the database may not hold the
+    reason yet while the run is let go); while it goes degraded, since when no thermocouple reading reaches its
+    estimate."""
+    ended = manager.ending_reason(run_id)
+    if ended is not None:
+        return ended
     sample = manager.latest(run_id) if state == DEGRADED else None
     since = getattr(sample.snapshot, "blind_since", None) if sample is not None else None
     return None if since is None else f"blind since t = {since:.1f} s: no thermocouple reading reaches the estimate"
