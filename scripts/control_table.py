@@ -34,7 +34,8 @@ import numpy as np
 
 SETPOINT, T_E, DURATION = 1100.0, 120.0, 240.0
 VARIANTS = {
-    "paper": {"control.feedback": "lqg", "control.plan_heat_capacity": "constant", "control.feedforward_limit": 1.0},
+    "paper": {"control.feedback": "lqg", "control.plan_heat_capacity": "constant", "control.feedforward_limit": 1.0,
+              "control.position_feedforward": False},
     "twin": {},
     "lqg": {"control.feedback": "lqg"},
     "mpc": {"control.feedback": "mpc"},

@@ -397,6 +397,9 @@ class Control(_Section):
     mpc_moves: int = Field(5, ge=1, le=50, description="MPC: free moves over the horizon (the first one sample)")
     mpc_solver: Literal["osqp", "qpoases"] = Field("osqp", description="MPC: the QP solver (twin/control/qp.py)")
     mpc_rate: float = Field(1.0, gt=0.0, le=10.0, description="MPC: largest input change per second (u_max/s)")
+    position_feedforward: bool = Field(
+        False, description="an oscillating specimen's lamp powers follow its position (twin/control/"
+        "position_feedforward.py); the paper's controller has no such term")
 
 
 class TruthRadiation(_Section):
@@ -656,6 +659,7 @@ SMALL_OVERRIDES: dict[str, Any] = {
     "control.feedback": "lqg",
     "control.plan_heat_capacity": "constant",
     "control.feedforward_limit": 1.0,
+    "control.position_feedforward": False,
     "radiation.rays_per_specimen_cell": 400,
     "radiation.rays_per_lamp": 8000,
     "radiation.rays_per_wall": 4000,

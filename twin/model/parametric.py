@@ -223,6 +223,15 @@ class ParametricModel:
         return Evaluation(theta=th, T=T, f=f, loss=loss, lamps=lamps, emission=emission,
                           capacity=self.capacity_scaling(th))
 
+    def input_matrix(self, eta: float = 0.0, p: Parameters | None = None) -> Array:
+        """d f / d u (n, m) in K/s at the position's weights: (1 + p_L) sum_w (B + p_e dB), constant capacity."""
+        pv = p or Parameters()
+        out = np.zeros((self.n, self.m))
+        for node, w in self.positions(eta):
+            B = node.B if node.dB is None else node.B + pv.emissivity * node.dB
+            out += w * B
+        return (1.0 + pv.lamp_efficiency) * out
+
     def rhs(self, theta: ArrayLike, u: ArrayLike, eta: float = 0.0, p: Parameters | None = None) -> Array:
         """f(theta, u; eta, p) in K/s (with the temperature-dependent capacity if configured)."""
         return self.evaluate(theta, u, eta, p).rate

@@ -63,6 +63,7 @@ import numpy as np
 
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
+from twin.control.position_feedforward import PositionFeedforward
 from twin.estimation.consistency import cell_nees
 from twin.estimation.uncertainty import FieldUncertainty
 from twin.events import RunEvent
@@ -152,6 +153,8 @@ class ClosedLoop:
         first = self.changes.current
         self.feedback = scenario.control.feedback or cfg.control.feedback
         self.controller = make_controller(self.feedback, first.model, first.plan, first.gains, cfg)
+        #: the oscillating specimen's lamp powers follow its position (``[control] position_feedforward``)
+        self.position_ff = self._position_feedforward(first.oscillation)
         self.estimators = RunEstimators(scenario.estimator, self.tables, scenario.oscillation, cfg, theta0)
         self.estimator = self.estimators.primary  # the one that feeds the controller
         self.detector = FaultDetector(cfg, first.nominal, n_parameters=self.estimator.k)
@@ -243,6 +246,8 @@ class ClosedLoop:
                 changes.request("calibration", due)
             ctl = changes.current
             u, u_ff, _du = self.controller.control_at(t, theta)  # eqs. 17, 25
+            if self.position_ff is not None:  # the position's share of the heat input, fed forward
+                u = self.position_ff.apply(theta, u, eta, self.estimator.parameters, changes.lamp_gains)
             compute_s = time.perf_counter() - c0
             T_ref = float(changes.ref_samples[j])
 
@@ -282,6 +287,12 @@ class ClosedLoop:
             self.compute_ms.append(1000.0 * (compute_s + time.perf_counter() - c0))
             self.j += 1
             return snap
+
+    def _position_feedforward(self, oscillation: OscillationSpec) -> PositionFeedforward | None:
+        """The position's feedforward for a motion (None: switched off, or a fixed specimen)."""
+        if not self.cfg.control.position_feedforward:
+            return None
+        return PositionFeedforward.of(self.tables, oscillation, self.cfg)
 
     def _note_lateness(self, readings: Readings, t: float) -> None:
         """Count a sample with missing readings; an event when a run of late samples starts and ends."""
@@ -381,4 +392,5 @@ class ClosedLoop:
             self.controller.state = IntegratorState()
         if motion_changed:
             self.estimators.switch_motion(plan.oscillation if plan.oscillation.enabled else None)
+            self.position_ff = self._position_feedforward(plan.oscillation)
             self.detector.set_model(plan.nominal)
