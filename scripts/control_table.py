@@ -156,6 +156,8 @@ def table(out: Path) -> str:
         if variant != "paper" and c:
             cp = "c_p(T)" if c["plan_heat_capacity"] == "temperature" else "constant c_p"
             words = f"{variant}: {c['feedback'].upper()}, {cp}, limit {c['feedforward_limit']:g}"
+            if c.get("mpc_homogeneity") and c["feedback"] == "mpc":
+                words += f", variance weight {c['mpc_homogeneity']:g}"
         if second:
             words += ", 2nd run (learnt)"
         cells = [furnace, words, ",".join(str(r["seed"]) for r in runs)]

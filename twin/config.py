@@ -397,6 +397,8 @@ class Control(_Section):
     mpc_moves: int = Field(5, ge=1, le=50, description="MPC: free moves over the horizon (the first one sample)")
     mpc_solver: Literal["osqp", "qpoases"] = Field("osqp", description="MPC: the QP solver (twin/control/qp.py)")
     mpc_rate: float = Field(1.0, gt=0.0, le=10.0, description="MPC: largest input change per second (u_max/s)")
+    mpc_homogeneity: float = Field(0.0, ge=0.0, description="MPC: weight of the fillet's variance (eq. 21) at the "
+                                   "horizon's end, relative to q0 on the mean error (0: the LQG's cost alone)")
     position_feedforward: bool = Field(
         False, description="an oscillating specimen's lamp powers follow its position (twin/control/"
         "position_feedforward.py); the paper's controller has no such term")

@@ -169,6 +169,41 @@ def test_constrained_qp_matches_scipy(standin, cfg, high):
         _explicit_cost(ref.x, gains, plan, standin, cfg, j, e0, blocks) * (1 + 1e-6)
 
 
+def test_the_fillet_variance_weight_matches_the_explicit_problem(standin, cfg, high, ramp):
+    """``homogeneity`` = q_W: the QP minimises the explicit cost plus q_W theta_H^T W theta_H (eq. 21, theta_H =
+    theta_ref,H + d_H at the horizon's end), checked against the explicit problem by scipy (no bounds active;
+    the reference holds still in this plan).  In a ramp, where the reference moves, the term is left out."""
+    plan, gains = high
+    j, q_w = 20, 50.0
+    settings = MPCSettings(horizon=20, moves=4, rate=10.0, homogeneity=q_w)
+    e0 = _e0(standin, 0.5, e_I=0.1)
+    w = cfg.lqg
+    pred = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, None, settings,
+                        W=standin.W)
+    blocks, H = pred.blocks, sum(pred.blocks)
+
+    def cost(z):
+        k, x = 0, e0[:standin.n].copy()
+        for b, length in enumerate(blocks):  # the nodes' deviation d_H under the held moves
+            for _ in range(length):
+                Phi, Gam = gains.linearisation(j + k)
+                x = Phi @ x + Gam @ z[b * standin.m:(b + 1) * standin.m]
+                k += 1
+        theta_H = plan.theta_ref[j + H] + x
+        return _explicit_cost(z, gains, plan, standin, cfg, j, e0, blocks) + q_w * theta_H @ standin.W @ theta_H
+
+    ref = scipy.optimize.minimize(cost, np.zeros(pred.qp.g.size), method="BFGS", options={"gtol": 1e-9})
+    z = np.linalg.solve(pred.qp.H, -pred.qp.g)  # the QP's unconstrained minimiser
+    np.testing.assert_allclose(z, ref.x, atol=1e-5 * max(1.0, np.abs(ref.x).max()))
+    plain = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, None,
+                         MPCSettings(horizon=20, moves=4, rate=10.0))
+    assert np.abs(np.linalg.solve(plain.qp.H, -plain.qp.g) - z).max() > 1e-4  # the weight matters here
+    ramp_plan, ramp_gains = ramp
+    a, b = (condensed_qp(ramp_gains, ramp_plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, None, st, W=standin.W)
+            for st in (settings, MPCSettings(horizon=20, moves=4, rate=10.0)))
+    np.testing.assert_array_equal(a.qp.H, b.qp.H)
+
+
 def test_a_saturated_group_is_taken_over_by_the_others(standin, cfg, high):
     """Too cold with group 0 at full power: the LQG clips group 0's correction and loses it; the MPC puts
     more on the groups that still have room, and the predicted mean error shrinks faster."""

@@ -60,6 +60,8 @@ class MPCSettings:
     moves: int
     rate: float
     solver: str = "osqp"
+    #: weight of the fillet's variance theta^T W theta (eq. 21) at the horizon's end (0: the LQG's cost alone)
+    homogeneity: float = 0.0
 
 
 def move_blocks(H: int, moves: int) -> list[int]:
@@ -173,7 +175,7 @@ def _structure(blocks: tuple[int, ...], m: int, r0: float, n_rates: int) -> tupl
 def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1: float, r0: float,
                  delta0: float, j: int, e0: Array, u_prev: Array | None, s: MPCSettings,
                  with_rates: bool = True, cache: dict[int, SegmentPowers] | None = None,
-                 plan_deltas: Array | None = None) -> Prediction:
+                 plan_deltas: Array | None = None, W: Array | None = None) -> Prediction:
     """The MPC's QP at sample j from the augmented error e0 = [theta_hat - theta_ref,j ; e_I] (module docstring).
 
     ``cache``: :class:`SegmentPowers` of the held linearisations by key, kept between samples of one plan;
@@ -236,6 +238,11 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     x_free = np.append(d_free, I_free)
     Hess += G_full.T @ PT @ G_full
     grad += G_full.T @ (PT @ x_free)
+    holding = plan.T_ref[min(end, N)] == plan.T_ref[min(j, N)]  # the reference holds still over the horizon
+    if W is not None and s.homogeneity > 0.0 and holding:  # (q_W / 2) theta_H^T W theta_H, theta_H = theta_ref,H + d_H
+        WGd = W @ Gd
+        Hess += s.homogeneity * (Gd.T @ WGd)
+        grad += s.homogeneity * (WGd.T @ (d_free + plan.theta_ref[min(end, N)]))
     # bounds per move: u in [0, 1] at every sample it is held
     lbx = np.maximum.reduceat(-u_ff, starts, axis=0).ravel()  # per move: max(-u_ff), min(1 - u_ff) of its samples
     ubx = np.minimum.reduceat(1.0 - u_ff, starts, axis=0).ravel()
@@ -269,6 +276,8 @@ class MPCController(Controller):
             self.settings = mpc_settings(self.cfg)
         if self.solver is None:
             self.solver = make_solver(self.settings.solver)
+        #: W of eq. (21) when the settings weigh the fillet's variance (made once: fe.W builds it on every call)
+        self.variance = np.asarray(self.model.W, float) if self.settings.homogeneity > 0.0 else None
 
     def control(self, j: int, theta_hat: ArrayLike) -> tuple[Array, Array, Array]:
         t0 = time.perf_counter()
@@ -289,7 +298,7 @@ class MPCController(Controller):
         du = None
         for with_rates in (True, False):
             pred = condensed_qp(self.gains, self.plan, c_m, w.q0, w.q1, w.r0, w.delta0, j, e, self.u_prev,
-                                self.settings, with_rates, self.powers, self.deltas)
+                                self.settings, with_rates, self.powers, self.deltas, self.variance)
             res = self.solver.solve(pred.qp)
             if res.ok:
                 du = res.z[: u_ff.size]
@@ -321,7 +330,8 @@ def mpc_settings(cfg: FurnaceConfig) -> MPCSettings:
     ctl = cfg.control
     t_s = float(cfg.sampling.t_s)
     return MPCSettings(horizon=max(1, int(round(ctl.mpc_horizon / t_s))), moves=int(ctl.mpc_moves),
-                       rate=float(ctl.mpc_rate) * t_s, solver=str(ctl.mpc_solver))
+                       rate=float(ctl.mpc_rate) * t_s, solver=str(ctl.mpc_solver),
+                       homogeneity=float(ctl.mpc_homogeneity))
 
 
 def make_controller(feedback: str, model: DiscreteDynamics, plan: FeedforwardPlan, gains: Gains,
