@@ -160,3 +160,27 @@ def test_a_fixed_run_is_unchanged_to_the_bit(small_radiation, small_truth_radiat
     b = _run(small_radiation, small_truth_radiation, fixed, True)
     np.testing.assert_array_equal(a["u"], b["u"])
     np.testing.assert_array_equal(a["field_hat"], b["field_hat"])
+
+
+def test_the_feedforward_follows_a_live_oscillation_switch(small_radiation):
+    """Oscillation switched on while running: the loop's correction is built for the new motion (and used: the
+    inputs differ from the controller's); switched off again, there is none."""
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    cfg = small_config().with_overrides({**TWIN_CONTROL, "control.position_feedforward": True})
+    loop = ClosedLoop(cfg, Scenario(reference={"setpoint": 800.0, "t_E": 10.0}, duration=30.0, seed=2),
+                      small_radiation)
+    assert loop.position_ff is None
+    for _ in range(20):
+        loop.step()
+    loop.set_oscillation(OSC)
+    assert loop.position_ff is not None and loop.position_ff.aware.oscillation == OSC
+    moved = 0
+    for _ in range(20):
+        s = loop.step()
+        out = loop.controller.last
+        moved += int(np.abs(s.u - out.u).max() > 1e-6)
+    assert moved > 10  # the loop applies the correction, not only builds it
+    loop.set_oscillation(OscillationSpec(enabled=False))
+    assert loop.position_ff is None
