@@ -307,7 +307,11 @@ class ModelError(_Section):
     """Measured model-error statistics for the *reported* covariance (twin.estimation.process_noise).
 
     Q_rep = q0 (q1 sign(M) + 1 1^T)^2 (the form of the filter's Q, constants from the measured one-step
-    error of the model against the truth) and the FE grid's representation error ``representation_rms`` (K)."""
+    error of the model against the truth) and the FE grid's representation error ``representation_rms`` (K).
+
+    The model's error differs with the specimen moving (averaged over the lamps) and fixed: ``q0_oscillating``
+    and ``bias_variance_oscillating`` are the oscillating specimen's values (None: the fixed specimen's);
+    :meth:`for_mode` resolves them."""
 
     q0: float = Field(gt=0)
     q1: float = Field(ge=0)
@@ -316,11 +320,38 @@ class ModelError(_Section):
     # states of the reported covariance (twin.estimation.thermocouple_tolerance); both 0 = left out
     tc_tolerance_fixed: float = Field(0.0, ge=0, le=50.0, description="K")
     tc_tolerance_relative: float = Field(0.0, ge=0, le=0.05, description="fraction of |t| in C")
+    q0_oscillating: float | None = Field(None, gt=0, description="K^2 per sample; None: q0")
+    # the model's constant bias as consider states (twin.estimation.model_bias): a Legendre shape of total degree
+    # bias_degree over the specimen, one variance per coefficient (K^2 per sample^2, in model_bias.terms order)
+    bias_degree: int = Field(0, ge=0, le=4)
+    bias_variance: tuple[float, ...] = ()  # empty: no bias carried
+    bias_variance_oscillating: tuple[float, ...] | None = None  # None: bias_variance
+
+    @model_validator(mode="after")
+    def _bias(self) -> Self:
+        k = (self.bias_degree + 1) * (self.bias_degree + 2) // 2
+        for name in ("bias_variance", "bias_variance_oscillating"):
+            v = getattr(self, name)
+            if v is not None and len(v) and len(v) != k:
+                raise ValueError(f"{name}: {k} variances for bias_degree = {self.bias_degree}, got {len(v)}")
+            if v is not None and any(x < 0 for x in v):
+                raise ValueError(f"{name}: variances must be >= 0")
+        return self
 
     @property
     def tc_bias(self) -> bool:
         """True when the TCs' deviations are carried (a tolerance is stated)."""
         return self.tc_tolerance_fixed > 0 or self.tc_tolerance_relative > 0
+
+    def for_mode(self, oscillating: bool) -> ModelError:
+        """The constants of a fixed or an oscillating specimen: q0 and bias_variance are the mode's (the
+        ``*_oscillating`` ones when set and oscillating), the rest as they are."""
+        if not oscillating:
+            return self
+        return self.model_copy(update={
+            "q0": self.q0 if self.q0_oscillating is None else self.q0_oscillating,
+            "bias_variance": (self.bias_variance if self.bias_variance_oscillating is None
+                              else self.bias_variance_oscillating)})
 
 
 class EKFWeights(_Section):

@@ -186,3 +186,115 @@ def test_reported_nis_and_consider_update_with_every_reading_and_with_one_missin
     S1 = C1 @ Pa @ C1.T + R
     assert one.nis == pytest.approx(0.3**2 / S1[0, 0], rel=1e-12)
     assert np.all(np.isfinite(one.P))
+
+
+#: the model bias's shape: a forcing on the unobserved middle state (and half of it on the third)
+G_BIAS = np.array([[0.0], [1.0], [0.5]])
+BIAS_VARIANCE = 0.5
+
+
+def _simulate_model_bias(carried: bool, seed: int, runs: int = 200, steps: int = 40) -> np.ndarray:
+    """Monte Carlo of the system above whose dynamics have a constant forcing G_BIAS c per run
+    (c ~ N(0, BIAS_VARIANCE), the filter does not know it: the model's own bias); returns per step the mean NEES
+    of the estimate against the reported covariance (the true Q, with or without the bias as consider states).
+    The filter is linear and ungated, so its gains and the reported covariance are the same in every run: one
+    filter gives them, the runs' states and estimates are propagated together."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros(steps)
+    LQ, LR = np.linalg.cholesky(Q_TRUE), np.sqrt(np.diag(R))
+    x = rng.standard_normal((runs, 3))
+    c = rng.normal(0.0, np.sqrt(BIAS_VARIANCE), (runs, 1))
+    x_hat = np.zeros((runs, 3))
+    state = EKFState(np.zeros(3), np.eye(3))
+    report = ReportedCovariance(np.eye(3), Q_TRUE, bias_shape=G_BIAS if carried else None,
+                                bias_variance=np.array([BIAS_VARIANCE]) if carried else None)
+    for k in range(steps):
+        x = x @ A.T + c @ G_BIAS.T + rng.standard_normal((runs, 3)) @ LQ.T
+        x_hat = x_hat @ A.T
+        state = EKFState(A @ state.theta, A @ state.P @ A.T + Q_TRUE)
+        report.predict(A)
+        y = x @ C.T + LR * rng.standard_normal((runs, 2))
+        state, info = ekf_update(state, y[0], C, R, gate=np.inf)
+        report.update(info.gain, C, R, info.innovation, info.used, y[0])
+        x_hat = x_hat + (y - x_hat @ C.T) @ info.gain.T
+        out[k] = np.mean([nees(e, report.P[:3, :3]) for e in x_hat - x])
+    return out
+
+
+def test_a_model_bias_carried_as_consider_states_makes_the_reported_covariance_consistent() -> None:
+    """The model misses a forcing that is constant for the run (banded's structured error, issue 25): the filter,
+    matched to the white noise, leaves a steady error where its sensors do not read.  Without the bias in the
+    reported covariance the NEES leaves the chi-square region; with it as Schmidt-Kalman consider states
+    (Phi_a's G block, process_noise module docstring) it stays inside (c Gaussian here, so the NEES is
+    chi-square).  Planted bugs that fail it: the cross-covariance of error and bias not propagated
+    (``P[:m, m:] += G P_cz`` left out of ``predict``), the cross terms X + X^T left out of P_xx.  (Leaving out
+    G P_cc G^T alone stays inside here; the exact test below catches it.)"""
+    lo, hi = chi2_interval(dof=3, runs=200, probability=0.99)
+    without = _simulate_model_bias(False, seed=31)
+    assert np.mean(without[20:] > hi) > 0.9, without
+    carried = _simulate_model_bias(True, seed=31)
+    assert np.sum((carried < lo) | (carried > hi)) <= 2, carried
+
+
+def test_reported_predict_with_tc_deviations_and_model_bias_is_the_augmented_form_written_out() -> None:
+    """Phi_a P_a Phi_a^T + Q_a with Phi_a = [[Phi, 0, G], [0, I, 0], [0, 0, I]] (the state, the TCs' deviations,
+    the bias's coefficients) after an update that correlated them all; then the update with C_a = [C, tol, 0].
+    Planted bug caught here: G P_cc G^T left out of ``predict``."""
+    rng = np.random.default_rng(7)
+    F = rng.normal(size=(3, 3))
+    P = F @ F.T + np.eye(3)
+    G = rng.normal(size=(3, 2))
+    var = np.array([0.4, 0.2])
+    L = 0.5 * P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    rep = ReportedCovariance(P, Q_TRUE, readings=2, tc_tolerance=(1.5, 0.0), bias_shape=G, bias_variance=var)
+    Pa = np.zeros((7, 7))
+    Pa[:3, :3], Pa[3:5, 3:5], Pa[5:, 5:] = P, np.eye(2) / 3.0, np.diag(var)
+    np.testing.assert_array_equal(rep.P, Pa)
+    Ca = np.concatenate([C, 1.5 * np.eye(2), np.zeros((2, 2))], axis=1)
+    La = np.concatenate([L, np.zeros((4, 2))])
+    Phi_a = np.eye(7)
+    Phi_a[:3, :3], Phi_a[:3, 5:] = A, G
+    Qa = np.zeros((7, 7))
+    Qa[:3, :3] = Q_TRUE
+    for _ in range(2):  # the second round starts from a P_a with every block filled
+        rep.predict(A)
+        Pa = Phi_a @ Pa @ Phi_a.T + Qa
+        np.testing.assert_allclose(rep.P, Pa, rtol=1e-12, atol=1e-12)
+        rep.update(L, C, R, np.array([0.3, -0.2]), np.array([True, True]), np.array([300.0, 301.0]))
+        I_LC = np.eye(7) - La @ Ca
+        Pa = I_LC @ Pa @ I_LC.T + La @ R @ La.T
+        np.testing.assert_allclose(rep.P, Pa, rtol=1e-12, atol=1e-12)
+
+
+def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
+    """``[ekf.model_error]`` per mode (issue 25): an oscillating specimen's estimator reports with q0_oscillating
+    and bias_variance_oscillating, a fixed one's with q0 and bias_variance; unset, both take the fixed values.  The
+    bias's shape has zero rows for the calibrated parameters (it forces temperatures only).  Planted bug caught
+    here: ``for_mode`` handing the fixed specimen the oscillating values."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.estimation.ekf import process_noise
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice, OscillationSpec
+
+    cfg = small_config().with_overrides({"ekf.model_error.q0": 2e-4, "ekf.model_error.q0_oscillating": 5e-5,
+                                         "ekf.model_error.bias_degree": 1,
+                                         "ekf.model_error.bias_variance": [1e-4, 2e-4, 3e-4],
+                                         "ekf.model_error.bias_variance_oscillating": [0.0, 0.0, 1e-5]})
+    tables = model_tables(cfg, radiation_model(cfg))
+    q1 = cfg.ekf.model_error.q1
+    for osc, q0, var in ((None, 2e-4, [1e-4, 2e-4, 3e-4]), (OscillationSpec(enabled=False), 2e-4, [1e-4, 2e-4, 3e-4]),
+                         (OscillationSpec(enabled=True), 5e-5, [0.0, 0.0, 1e-5])):
+        est = build_estimator(EstimatorChoice(calibrate=True), tables, osc, cfg, 300.0)
+        rep, n, k = est.reported, est.n, est.k
+        assert rep is not None and k > 0 and rep.G is not None
+        np.testing.assert_allclose(rep.Q[:n, :n], process_noise(est.model.fe.M, q0, q1), rtol=1e-12)
+        np.testing.assert_array_equal(np.diag(rep.P)[-3:], var)
+        assert rep.G.shape == (n + k, 3) and not rep.G[n:].any() and np.allclose(rep.G[:n, 0], 1.0)
+    plain = cfg.with_overrides({"ekf.model_error.q0_oscillating": None,
+                                "ekf.model_error.bias_variance_oscillating": None})
+    est = build_estimator(EstimatorChoice(), tables, OscillationSpec(enabled=True), plain, 300.0)
+    np.testing.assert_allclose(est.reported.Q[:est.n, :est.n], process_noise(est.model.fe.M, 2e-4, q1), rtol=1e-12)
+    with pytest.raises(ValueError, match="bias_variance"):
+        cfg.with_overrides({"ekf.model_error.bias_degree": 2})  # 3 variances for 6 terms

@@ -28,6 +28,17 @@ gain has zero rows for beta (it does not estimate them, so the estimate is uncha
 in the same Joseph form, which is exact for this gain.  The innovation's covariance then includes the
 deviations as well: S_rep = C_a P^- C_a^T + R.
 
+**The model's own bias (consider states as well).**  Part of the model's error is not white either: on a fixed
+specimen the model's steady heat balance is off by a forcing that stays the same for the run (the truth's lamp
+bands between the node lines, its view factors), so its one-step defect has a mean.  With ``bias_shape`` G (m, k)
+and ``bias_variance`` (k,) the reported covariance carries that forcing as k constant coefficients c,
+theta_{j+1} = F(theta_j, u_j) + G c + w_j, unknown to the filter (its gain has zero rows for c):
+
+    Phi_a = [[Phi, 0, G], [0, I, 0], [0, 0, I]],   P_a0 = blkdiag(P0, beta's, diag(bias_variance))
+
+with C_a = [C, diag(tol(y)), 0].  The TCs correct the bias where they read; the rest (between them) stays in the
+error and in its reported covariance (:mod:`twin.estimation.model_bias`: the basis and its measured variance).
+
 Example
 -------
 >>> import numpy as np
@@ -77,17 +88,30 @@ class ReportedCovariance:
     readings : number of TCs the filter reads (the consider states' count; needed with ``tc_tolerance``)
     tc_tolerance : (fixed K, relative of |t| in C) of the TCs' datasheet: carry their deviations as consider
         states (module docstring); None: the readings are taken as unbiased
+    bias_shape, bias_variance : G (m, k) and the variances (k,) of the model bias's constant coefficients
+        (module docstring); None: no bias carried
     """
 
     def __init__(self, P0: Array, Q: Array, readings: int = 0, tc_tolerance: tuple[float, float] | None = None,
-                 ) -> None:
+                 bias_shape: Array | None = None, bias_variance: Array | None = None) -> None:
         P0 = np.asarray(P0, float)
         self.m = P0.shape[0]  # the filter's state; the consider states follow
         self.tc_tolerance = tc_tolerance
         b = readings if tc_tolerance is not None else 0
-        self.P = np.zeros((self.m + b, self.m + b))
+        self.b = b  # the TCs' deviations, then the model bias's k coefficients
+        #: G (m, k) of the model bias (module docstring), None: no bias carried
+        self.G: Array | None = None
+        k = 0
+        if bias_shape is not None and bias_variance is not None and len(bias_variance):
+            self.G = np.asarray(bias_shape, float)
+            k = self.G.shape[1]
+            if self.G.shape[0] != self.m or len(bias_variance) != k:
+                raise ValueError(f"bias_shape must be ({self.m}, k) and bias_variance (k,): "
+                                 f"{self.G.shape}, {len(bias_variance)}")
+        self.P = np.zeros((self.m + b + k, self.m + b + k))
         self.P[: self.m, : self.m] = P0
-        self.P[self.m:, self.m:] = BETA_VARIANCE * np.eye(b)
+        self.P[self.m: self.m + b, self.m: self.m + b] = BETA_VARIANCE * np.eye(b)
+        self.P[self.m + b:, self.m + b:] = np.diag(np.asarray(bias_variance if k else [], float))
         self.Q = np.asarray(Q, float)
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
@@ -102,6 +126,12 @@ class ReportedCovariance:
         P[m:, m:] = self.P[m:, m:]
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
+        if self.G is not None:  # the bias's forcing G c enters the error: Phi_a's G block
+            c = m + self.b
+            G = self.G
+            X = P[:m, c:] @ G.T  # (Phi P_xc) G^T
+            P[:m, :m] += X + X.T + G @ self.P[c:, c:] @ G.T
+            P[:m, m:] += G @ self.P[c:, m:]
         P[m:, :m] = P[:m, m:].T
         self.P = P
 
@@ -109,7 +139,7 @@ class ReportedCovariance:
                readings: Array | None = None) -> None:
         """Joseph form (13) with the filter's gain (n, p; zero columns for readings left out) and the NIS;
         ``readings`` (K, the TCs' values) set tol(y) of the consider states (required with them)."""
-        b = self.P.shape[0] - self.m
+        b, z = self.b, self.P.shape[0] - self.m
         if b:
             if readings is None:
                 raise ValueError("the TCs' deviations are carried: update needs the readings")
@@ -117,7 +147,10 @@ class ReportedCovariance:
             if not np.isfinite(tol).all():  # a missing reading: no deviation to carry
                 tol = np.nan_to_num(tol, nan=0.0)
             C = np.concatenate([C, np.diag(tol)], axis=1)
-            gain = np.concatenate([gain, np.zeros((b, gain.shape[1]))], axis=0)
+        if z > b:  # the TCs read the field, not the bias's coefficients
+            C = np.concatenate([C, np.zeros((C.shape[0], z - b))], axis=1)
+        if z:
+            gain = np.concatenate([gain, np.zeros((z, gain.shape[1]))], axis=0)
         PCt = self.P @ C.T
         S = C @ PCt + R
         if used.all():  # the normal case: no fancy indexing (it costs more than the algebra at p = 3)
