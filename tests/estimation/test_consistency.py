@@ -84,10 +84,12 @@ def test_coverage_and_cell_nees() -> None:
     np.testing.assert_allclose(z, [0.0, (2.5 / 2) ** 2])
 
 
-def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
+@pytest.mark.parametrize("bias", [False, True])
+def test_the_reported_covariance_leaves_the_estimate_bit_for_bit(bias: bool) -> None:
     """[ekf.model_error] changes what the twin reports, never its estimate: the joint filter with and without it
     (small furnace, calibrating, position-aware, 30 samples of a heat-up with a reading 2 K off) gives identical
-    theta and filter P, while the reported covariance differs from the filter's."""
+    theta and filter P, while the reported covariance differs from the filter's; also with the model's bias
+    carried (shape and per node, consider states)."""
     from twin.config import small_config
     from twin.estimation.choice import build_estimator
     from twin.model.tables import model_tables
@@ -95,6 +97,9 @@ def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
     from twin.scenario import EstimatorChoice
 
     cfg = small_config()
+    if bias:
+        cfg = cfg.with_overrides({"ekf.model_error.bias_degree": 1, "ekf.model_error.bias_variance": [0.04, 1e-3, 1e-3],
+                                  "ekf.model_error.bias_node_variance": 2e-3})
     assert cfg.ekf.model_error is not None
     plain = cfg.with_overrides({"ekf.model_error": None})
     tables = model_tables(cfg, radiation_model(cfg))
@@ -111,6 +116,7 @@ def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
     np.testing.assert_array_equal(a.state.P, b.state.P)
     np.testing.assert_array_equal(b.reported_P, b.state.P)  # without model error the filter's P is reported
     assert not np.allclose(a.reported_P, a.state.P)
+    assert a.reported.P.shape[0] == a.n + a.k + 3 + (3 + a.n if bias else 0)  # TCs' deviations, the bias
 
 
 #: faster dynamics for the deviations' test: the cross-covariance of error and deviations then decays between
@@ -226,9 +232,9 @@ def test_a_model_bias_carried_as_consider_states_makes_the_reported_covariance_c
     matched to the white noise, leaves a steady error where its sensors do not read.  Without the bias in the
     reported covariance the NEES leaves the chi-square region; with it as Schmidt-Kalman consider states
     (Phi_a's G block, process_noise module docstring) it stays inside (c Gaussian here, so the NEES is
-    chi-square).  Planted bugs that fail it: the cross-covariance of error and bias not propagated
-    (``P[:m, m:] += G P_cz`` left out of ``predict``), the cross terms X + X^T left out of P_xx.  (Leaving out
-    G P_cc G^T alone stays inside here; the exact test below catches it.)"""
+    chi-square).  Planted bugs that fail it (and the exact test below): the cross-covariance of error and bias
+    not propagated (``P[:m, m:] += G P_cz`` left out of ``predict``), the cross terms X + X^T left out of P_xx,
+    the bias's own term G P_cc G^T left out."""
     lo, hi = chi2_interval(dof=3, runs=200, probability=0.99)
     without = _simulate_model_bias(False, seed=31)
     assert np.mean(without[20:] > hi) > 0.9, without
@@ -267,8 +273,8 @@ def test_reported_predict_with_tc_deviations_and_model_bias_is_the_augmented_for
 
 
 def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
-    """``[ekf.model_error]`` per mode (issue 25): an oscillating specimen's estimator reports with q0_oscillating
-    and bias_variance_oscillating, a fixed one's with q0 and bias_variance; unset, both take the fixed values.  The
+    """``[ekf.model_error]`` per mode (issue 25): an oscillating specimen's estimator reports with the q0 and
+    bias_variance of ``[ekf.model_error.oscillating]``, a fixed one's with its own; unset, both take the fixed ones.  The
     bias's shape has zero rows for the calibrated parameters (it forces temperatures only).  Planted bug caught
     here: ``for_mode`` handing the fixed specimen the oscillating values."""
     from twin.config import small_config
@@ -278,10 +284,13 @@ def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
     from twin.radiation import radiation_model
     from twin.scenario import EstimatorChoice, OscillationSpec
 
-    cfg = small_config().with_overrides({"ekf.model_error.q0": 2e-4, "ekf.model_error.q0_oscillating": 5e-5,
-                                         "ekf.model_error.bias_degree": 1,
+    cfg = small_config().with_overrides({"ekf.model_error.q0": 2e-4, "ekf.model_error.bias_degree": 1,
                                          "ekf.model_error.bias_variance": [1e-4, 2e-4, 3e-4],
-                                         "ekf.model_error.bias_variance_oscillating": [0.0, 0.0, 1e-5]})
+                                         "ekf.model_error.oscillating": {"q0": 5e-5, "representation_rms": 0.25,
+                                                                         "bias_variance": [0.0, 0.0, 1e-5]}})
+    me = cfg.ekf.model_error
+    assert me.for_mode(False).representation_rms == me.representation_rms != 0.25  # the σ map's r per mode
+    assert me.for_mode(True).representation_rms == 0.25 and me.for_mode(True).q1 == me.q1  # unset: the fixed one
     tables = model_tables(cfg, radiation_model(cfg))
     q1 = cfg.ekf.model_error.q1
     for osc, q0, var in ((None, 2e-4, [1e-4, 2e-4, 3e-4]), (OscillationSpec(enabled=False), 2e-4, [1e-4, 2e-4, 3e-4]),
@@ -292,8 +301,7 @@ def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
         np.testing.assert_allclose(rep.Q[:n, :n], process_noise(est.model.fe.M, q0, q1), rtol=1e-12)
         np.testing.assert_array_equal(np.diag(rep.P)[-3:], var)
         assert rep.G.shape == (n + k, 3) and not rep.G[n:].any() and np.allclose(rep.G[:n, 0], 1.0)
-    plain = cfg.with_overrides({"ekf.model_error.q0_oscillating": None,
-                                "ekf.model_error.bias_variance_oscillating": None})
+    plain = cfg.with_overrides({"ekf.model_error.oscillating": None})
     est = build_estimator(EstimatorChoice(), tables, OscillationSpec(enabled=True), plain, 300.0)
     np.testing.assert_allclose(est.reported.Q[:est.n, :est.n], process_noise(est.model.fe.M, 2e-4, q1), rtol=1e-12)
     with pytest.raises(ValueError, match="bias_variance"):

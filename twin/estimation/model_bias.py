@@ -41,9 +41,15 @@ def legendre_shape(x_rel: Array, y_rel: Array, degree: int) -> Array:
     return np.column_stack(cols) if cols else np.zeros((len(xi), 0))
 
 
-def node_shape(fe: Any, degree: int, extra_rows: int = 0) -> Array:
-    """G at the FE nodes of ``fe`` (:class:`twin.model.fe.FEModel`), with ``extra_rows`` zero rows appended (the
-    calibrated parameters of a joint state: the bias forces temperatures only)."""
+def node_shape(fe: Any, degree: int | None, extra_rows: int = 0, per_node: bool = False) -> Array:
+    """G at the FE nodes of ``fe`` (:class:`twin.model.fe.FEModel`): the Legendre shape of ``degree`` (None: none),
+    then with ``per_node`` one column per node (a constant forcing of each node on its own, the identity), and
+    ``extra_rows`` zero rows appended (the calibrated parameters of a joint state: the bias forces temperatures
+    only)."""
     nodes = fe.nodes()
-    G = legendre_shape(nodes[:, 0] / fe.x_nodes[-1], nodes[:, 1] / fe.y_nodes[-1], degree)
+    cols = [] if degree is None else [legendre_shape(nodes[:, 0] / fe.x_nodes[-1], nodes[:, 1] / fe.y_nodes[-1],
+                                                     degree)]
+    if per_node:
+        cols.append(np.eye(len(nodes)))
+    G = np.concatenate(cols, axis=1) if cols else np.zeros((len(nodes), 0))
     return np.concatenate([G, np.zeros((extra_rows, G.shape[1]))]) if extra_rows else G

@@ -112,6 +112,12 @@ class ReportedCovariance:
         self.P[: self.m, : self.m] = P0
         self.P[self.m: self.m + b, self.m: self.m + b] = BETA_VARIANCE * np.eye(b)
         self.P[self.m + b:, self.m + b:] = np.diag(np.asarray(bias_variance if k else [], float))
+        # the consider states' block never changes (zero gain rows, identity dynamics): G P_cz and G P_cc G^T of
+        # predict are constants
+        if self.G is not None:
+            c = self.m + b
+            self._G_Pcz = self.G @ self.P[c:, self.m:]
+            self._G_Pcc_Gt = self._G_Pcz[:, b:] @ self.G.T
         self.Q = np.asarray(Q, float)
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
@@ -127,11 +133,9 @@ class ReportedCovariance:
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
         if self.G is not None:  # the bias's forcing G c enters the error: Phi_a's G block
-            c = m + self.b
-            G = self.G
-            X = P[:m, c:] @ G.T  # (Phi P_xc) G^T
-            P[:m, :m] += X + X.T + G @ self.P[c:, c:] @ G.T
-            P[:m, m:] += G @ self.P[c:, m:]
+            X = P[:m, m + self.b:] @ self.G.T  # (Phi P_xc) G^T
+            P[:m, :m] += X + X.T + self._G_Pcc_Gt
+            P[:m, m:] += self._G_Pcz
         P[m:, :m] = P[:m, m:].T
         self.P = P
 

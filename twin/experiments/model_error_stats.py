@@ -98,6 +98,42 @@ def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], mo
             "samples": len(d_all), "defect_rms": float(np.sqrt(np.mean(d_all**2)))}
 
 
+def bias_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], model_for: Any, degree: int,
+                    ) -> dict[str, Any]:
+    """The model's constant bias (``[ekf.model_error] bias_*``, :mod:`twin.estimation.model_bias`): each run's
+    mean one-step defect over its steady window (1.5 t_E <= t <= 2 t_E, where the run's forcing error has
+    settled and the noise averages out) fitted by the Legendre shape of ``degree`` at the nodes (least squares);
+    ``{"bias_variance": mean over the runs of each coefficient squared, "coefficients": per run,
+    "bias_node_variance": mean square of what the shape leaves of the runs' means (each node's own constant
+    forcing), "mean_rms": rms of the runs' mean defects, "q0_white", "q1_white": the form of Q fitted to the
+    steady window's defects less their run's mean (what is left of the defect once the bias is carried)}``
+    (K per sample)."""
+    from twin.estimation.model_bias import node_shape
+
+    coefs, means, resid, centred = [], [], [], []
+    for ts in runs:
+        model = model_for(ts)
+        d, _ = defects(cfg, ts, model)
+        tf = np.asarray(ts["t_field"], float)
+        t_E = float(ts["t_E"])
+        # the sample time of each defect (defects keeps the j with a field one step later)
+        t_j = tf[:-1][np.abs(np.diff(tf) - cfg.sampling.t_s) <= 1e-6]
+        steady = d[(t_j >= 1.5 * t_E - 1e-9) & (t_j <= 2.0 * t_E + 1e-9)]
+        mean = steady.mean(axis=0)
+        centred.append(steady - mean)
+        G = node_shape(model.fe, degree)
+        c, *_ = np.linalg.lstsq(G, mean, rcond=None)
+        coefs.append(c)
+        means.append(mean)
+        resid.append(mean - G @ c)
+    C = np.asarray(coefs)
+    w = np.concatenate(centred)
+    q0_white, q1_white = fit_form(w.T @ w / len(w), np.sign(np.asarray(model.fe.M, float)))
+    return {"bias_variance": [float(v) for v in np.mean(C**2, axis=0)], "coefficients": C.tolist(),
+            "bias_node_variance": float(np.mean(np.square(resid))),
+            "mean_rms": float(np.sqrt(np.mean(np.square(means)))), "q0_white": q0_white, "q1_white": q1_white}
+
+
 def replay_metrics(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any) -> tuple[dict[str, Any], float]:
     """(metrics, largest |replayed - stored estimate| in K over the stored fields) of a stored run whose estimator
     is replayed with ``cfg`` (its ``[ekf.model_error]``); ``tables`` the twin's model tables of the furnace.
@@ -151,7 +187,8 @@ def replay_variants(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any, mode
     reports = _Reports([e.reported for e in ests])
     est.reported = reports  # type: ignore[assignment]  # the first filter drives every reported covariance
     n = est.n
-    uncs = [FieldUncertainty(est.model.fe, getattr(v.ekf.model_error, "representation_rms", 0.0)) for v in variants]
+    uncs = [FieldUncertainty(est.model.fe, v.ekf.model_error.for_mode(sc.oscillation.enabled).representation_rms)
+            for v in variants]
     tf = np.asarray(ts["t_field"], float)
     shape = np.asarray(ts["field_hat"]).shape
     sigmas = [np.zeros(shape) for _ in variants]
