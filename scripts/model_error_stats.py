@@ -100,11 +100,12 @@ def main(argv: list[str] | None = None) -> int:
             ms = [r[i] for r in per_run]
             sys.stdout.write(json.dumps({**label, **{k: [round(m[k], 4) for m in ms] for k in KEYS}}) + "\n")
         return 0
-    rows = ["| run | " + " | ".join(KEYS) + " |", "|---" * (len(KEYS) + 1) + "|"]
+    # the last column: the largest |replayed - stored estimate| (K): 0 when the replay is the run's own filter
+    rows = ["| run | " + " | ".join(KEYS) + " | replay deviation |", "|---" * (len(KEYS) + 2) + "|"]
     for p, ts in zip(paths, runs, strict=True):
-        m, _ = replay_metrics(cfg, ts, tables)
+        m, deviation = replay_metrics(cfg, ts, tables)
         cells = [f"{m[k]:.3f}" if k.startswith(("coverage", "nees", "nis")) else f"{100 * m[k]:.2f} %" for k in KEYS]
-        rows.append(f"| {p.stem} | " + " | ".join(cells) + " |")
+        rows.append(f"| {p.stem} | " + " | ".join(cells) + f" | {deviation:.1e} K |")
     sys.stdout.write("\n".join(rows) + "\n")
     return 0
 
