@@ -61,6 +61,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="measure: also the model's constant bias of this Legendre degree (bias_statistics)")
     ap.add_argument("--bias-scales", type=float, nargs="+", default=[1.0],
                     help="measure: factors on the measured bias variances (with the white rest of the defect)")
+    ap.add_argument("--bias-growth", action="store_true",
+                    help="measure: the bias grows with the temperature (its exponent fitted to the runs)")
     ap.add_argument("--runs", type=Path, required=True, help="folder for the runs' time series (reused)")
     args = ap.parse_args(argv)
     cfg = load_config(None if args.config == "default" else args.config)
@@ -87,14 +89,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.bias_degree is not None:
             # the model's bias as consider states (shape and per node) and the white rest of the defect, each
             # --bias-scales factor on the bias's variances
-            b = bias_statistics(cfg, runs, model_for, args.bias_degree)
+            b = bias_statistics(cfg, runs, model_for, args.bias_degree, exponent=None if args.bias_growth else 0.0)
             sys.stdout.write(json.dumps(b) + "\n")
             for bs in args.bias_scales:
                 labels.append({"bias_scale": bs})
                 mes.append({**base, "q0": b["q0_white"], "q1": b["q1_white"],
                             "representation_rms": stats["representation_rms"], "bias_degree": args.bias_degree,
                             "bias_variance": tuple(bs * v for v in b["bias_variance"]),
-                            "bias_node_variance": bs * b["bias_node_variance"]})
+                            "bias_node_variance": bs * b["bias_node_variance"],
+                            "bias_temperature": b["bias_temperature"],
+                            "bias_exponent": b["bias_exponent"] if args.bias_growth else 0.0})
         per_run = [replay_variants(cfg, ts, tables, mes)[0] for ts in runs]  # one filter replay per run
         for i, label in enumerate(labels):
             ms = [r[i] for r in per_run]

@@ -340,6 +340,10 @@ class ModelError(_Section):
     bias_degree: int = Field(0, ge=0, le=4)
     bias_variance: tuple[float, ...] = ()
     bias_node_variance: float = Field(0.0, ge=0)
+    # the bias grows with the temperature: its forcing is G c (T / bias_temperature)^bias_exponent, T the mean of
+    # the estimated nodes (the variances above hold at bias_temperature); exponent 0: constant
+    bias_temperature: float = Field(1000.0, gt=0, description="K")
+    bias_exponent: float = Field(0.0, ge=0, le=8)
     oscillating: ModeModelError | None = None  # None: the fixed specimen's values serve both
 
     @model_validator(mode="after")

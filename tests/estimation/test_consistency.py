@@ -243,27 +243,29 @@ def test_a_model_bias_carried_as_consider_states_makes_the_reported_covariance_c
 
 
 def test_reported_predict_with_tc_deviations_and_model_bias_is_the_augmented_form_written_out() -> None:
-    """Phi_a P_a Phi_a^T + Q_a with Phi_a = [[Phi, 0, G], [0, I, 0], [0, 0, I]] (the state, the TCs' deviations,
-    the bias's coefficients) after an update that correlated them all; then the update with C_a = [C, tol, 0].
-    Planted bug caught here: G P_cc G^T left out of ``predict``."""
+    """Phi_a P_a Phi_a^T + Q_a with Phi_a = [[Phi, 0, s G], [0, I, 0], [0, 0, I]] (the state, the TCs' deviations,
+    the bias's coefficients; s the bias's growth with the temperature) after an update that correlated them all;
+    then the update with C_a = [C, tol, 0].  Planted bugs caught here: G P_cc G^T left out of ``predict``; the
+    growth s applied to the cross terms but not to G P_cz."""
     rng = np.random.default_rng(7)
     F = rng.normal(size=(3, 3))
     P = F @ F.T + np.eye(3)
     G = rng.normal(size=(3, 2))
     var = np.array([0.4, 0.2])
     L = 0.5 * P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-    rep = ReportedCovariance(P, Q_TRUE, readings=2, tc_tolerance=(1.5, 0.0), bias_shape=G, bias_variance=var)
+    rep = ReportedCovariance(P, Q_TRUE, readings=2, tc_tolerance=(1.5, 0.0), bias_shape=G, bias_variance=var,
+                             bias_growth=(1000.0, 2.0))
     Pa = np.zeros((7, 7))
     Pa[:3, :3], Pa[3:5, 3:5], Pa[5:, 5:] = P, np.eye(2) / 3.0, np.diag(var)
     np.testing.assert_array_equal(rep.P, Pa)
     Ca = np.concatenate([C, 1.5 * np.eye(2), np.zeros((2, 2))], axis=1)
     La = np.concatenate([L, np.zeros((4, 2))])
-    Phi_a = np.eye(7)
-    Phi_a[:3, :3], Phi_a[:3, 5:] = A, G
     Qa = np.zeros((7, 7))
     Qa[:3, :3] = Q_TRUE
-    for _ in range(2):  # the second round starts from a P_a with every block filled
-        rep.predict(A)
+    for T, scale in ((None, 1.0), (1100.0, 1.21)):  # the second round from a P_a with every block filled, the
+        Phi_a = np.eye(7)                              # bias grown by (1100 / 1000)^2
+        Phi_a[:3, :3], Phi_a[:3, 5:] = A, scale * G
+        rep.predict(A, T)
         Pa = Phi_a @ Pa @ Phi_a.T + Qa
         np.testing.assert_allclose(rep.P, Pa, rtol=1e-12, atol=1e-12)
         rep.update(L, C, R, np.array([0.3, -0.2]), np.array([True, True]), np.array([300.0, 301.0]))
@@ -306,3 +308,27 @@ def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
     np.testing.assert_allclose(est.reported.Q[:est.n, :est.n], process_noise(est.model.fe.M, 2e-4, q1), rtol=1e-12)
     with pytest.raises(ValueError, match="bias_variance"):
         cfg.with_overrides({"ekf.model_error.bias_degree": 2})  # 3 variances for 6 terms
+
+
+def test_the_estimator_grows_the_reported_bias_with_its_temperature() -> None:
+    """``bias_exponent`` p: the bias's forcing this step is (mean of the estimated nodes / bias_temperature)^p
+    times its value at bias_temperature; p = 0 or no bias carried: 1.  The estimator hands its mean temperature
+    to the reported covariance.  Planted bug caught here: the ratio inverted (bias_temperature / T)."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice
+
+    base = small_config()
+    tables = model_tables(base, radiation_model(base))
+    for overrides, expected in (({"ekf.model_error.bias_variance": [0.04], "ekf.model_error.bias_exponent": 2.0,
+                                  "ekf.model_error.bias_temperature": 300.0}, 4.0),
+                                ({"ekf.model_error.bias_variance": [0.04]}, 1.0),
+                                ({"ekf.model_error.bias_exponent": 2.0, "ekf.model_error.bias_temperature": 300.0}, 1.0)):
+        est = build_estimator(EstimatorChoice(), tables, None, base.with_overrides(overrides), 600.0)
+        seen: list[float] = []
+        inner = est.reported.predict
+        est.reported.predict = lambda Phi, T=None, inner=inner: (seen.append(T), inner(Phi, T))[1]  # type: ignore
+        est.predict(np.full(len(base.lamps.groups), 0.5), 0.0)
+        assert seen == [pytest.approx(600.0)] and est.reported.bias_scale(600.0) == pytest.approx(expected), overrides

@@ -44,7 +44,7 @@ def test_bias_statistics_recovers_a_planted_constant_forcing() -> None:
         runs.append({"t": t, "t_field": t, "u": np.tile(u, (m, 1)), "eta": np.zeros(m),
                      "field_true": np.asarray(fields).reshape(m, len(y), len(x)), "x": x, "y": y,
                      "L_s": cfg.specimen.length, "W_s": cfg.specimen.width, "t_E": t_E})
-    b = bias_statistics(cfg, runs, lambda ts: model, 1)
+    b = bias_statistics(cfg, runs, lambda ts: model, 1, exponent=0.0)
     np.testing.assert_allclose(b["bias_variance"], np.mean(np.square(cs), axis=0), rtol=1e-4, atol=1e-9)
     assert np.isclose(b["bias_node_variance"], np.mean(extra**2) / 2, rtol=1e-3)  # one run of two has it
     assert b["q0_white"] < 1e-9

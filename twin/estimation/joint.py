@@ -105,7 +105,8 @@ class JointEstimator:
                 P0, reported_process_noise(fe.M, me, self.Q[n:, n:]), readings=C.shape[0],
                 tc_tolerance=(me.tc_tolerance_fixed, me.tc_tolerance_relative) if me.tc_bias else None,
                 bias_shape=node_shape(fe, me.bias_degree if me.bias_variance else None, k, me.bias_node_variance > 0),
-                bias_variance=np.asarray(me.bias_variances(n), float))
+                bias_variance=np.asarray(me.bias_variances(n), float),
+                bias_growth=(me.bias_temperature, me.bias_exponent))
         self._cov_dtype = np.float32 if e.covariance_precision == "single" else np.float64
         self._tol = e.jacobian_tolerance
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))
@@ -197,7 +198,7 @@ class JointEstimator:
         theta_next = theta + self.model.t_s * e.rate
         P = propagate_covariance(Phi, self._x.P, self.Q)
         if self.reported is not None:
-            self.reported.predict(Phi)
+            self.reported.predict(Phi, float(np.mean(theta)))  # the bias's growth at the estimate's temperature
         self._x = EKFState(np.concatenate([theta_next, self._x.theta[n:]]), P)
         return self.state
 

@@ -32,9 +32,10 @@ deviations as well: S_rep = C_a P^- C_a^T + R.
 specimen the model's steady heat balance is off by a forcing that stays the same for the run (the truth's lamp
 bands between the node lines, its view factors), so its one-step defect has a mean.  With ``bias_shape`` G (m, k)
 and ``bias_variance`` (k,) the reported covariance carries that forcing as k constant coefficients c,
-theta_{j+1} = F(theta_j, u_j) + G c + w_j, unknown to the filter (its gain has zero rows for c):
+theta_{j+1} = F(theta_j, u_j) + s_j G c + w_j, unknown to the filter (its gain has zero rows for c; s_j = (T_j / T_ref)^p
+with T_j the mean of the estimated nodes: the bias grows with the temperature; p = 0: constant):
 
-    Phi_a = [[Phi, 0, G], [0, I, 0], [0, 0, I]],   P_a0 = blkdiag(P0, beta's, diag(bias_variance))
+    Phi_a = [[Phi, 0, s_j G], [0, I, 0], [0, 0, I]],   P_a0 = blkdiag(P0, beta's, diag(bias_variance))
 
 with C_a = [C, diag(tol(y)), 0].  The TCs correct the bias where they read; the rest (between them) stays in the
 error and in its reported covariance (:mod:`twin.estimation.model_bias`: the basis and its measured variance).
@@ -93,7 +94,8 @@ class ReportedCovariance:
     """
 
     def __init__(self, P0: Array, Q: Array, readings: int = 0, tc_tolerance: tuple[float, float] | None = None,
-                 bias_shape: Array | None = None, bias_variance: Array | None = None) -> None:
+                 bias_shape: Array | None = None, bias_variance: Array | None = None,
+                 bias_growth: tuple[float, float] = (1.0, 0.0)) -> None:
         P0 = np.asarray(P0, float)
         self.m = P0.shape[0]  # the filter's state; the consider states follow
         self.tc_tolerance = tc_tolerance
@@ -101,6 +103,8 @@ class ReportedCovariance:
         self.b = b  # the TCs' deviations, then the model bias's k coefficients
         #: G (m, k) of the model bias (module docstring), None: no bias carried
         self.G: Array | None = None
+        #: (T_ref K, p): the bias's forcing at the mean temperature T is (T / T_ref)^p times its value at T_ref
+        self.bias_growth = bias_growth
         k = 0
         if bias_shape is not None and bias_variance is not None and len(bias_variance):
             self.G = np.asarray(bias_shape, float)
@@ -122,8 +126,18 @@ class ReportedCovariance:
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
 
-    def predict(self, Phi: NDArray[np.floating[Any]]) -> None:
-        """P^- = Phi P Phi^T + Q_rep (15); the deviations stay what they were (Phi_a of the module docstring)."""
+    def bias_scale(self, temperature: float | None) -> float:
+        """s_j of the module docstring: (T / T_ref)^p of ``bias_growth`` at the mean temperature T (K) of the
+        estimate; 1 without a bias, without growth or without a temperature."""
+        T_ref, p = self.bias_growth
+        if self.G is None or not p or temperature is None:
+            return 1.0
+        return float((temperature / T_ref) ** p)
+
+    def predict(self, Phi: NDArray[np.floating[Any]], temperature: float | None = None) -> None:
+        """P^- = Phi P Phi^T + Q_rep (15); the deviations stay what they were (Phi_a of the module docstring);
+        ``temperature`` (K, the estimate's mean) sets the bias's growth s_j (:meth:`bias_scale`)."""
+        bias_scale = self.bias_scale(temperature)
         m = self.m
         if self.P.shape[0] == m:
             self.P = propagate_covariance(Phi, self.P, self.Q)
@@ -133,9 +147,9 @@ class ReportedCovariance:
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
         if self.G is not None:  # the bias's forcing G c enters the error: Phi_a's G block
-            X = P[:m, m + self.b:] @ self.G.T  # (Phi P_xc) G^T
-            P[:m, :m] += X + X.T + self._G_Pcc_Gt
-            P[:m, m:] += self._G_Pcz
+            X = P[:m, m + self.b:] @ (bias_scale * self.G.T)  # (Phi P_xc) (s G)^T
+            P[:m, :m] += X + X.T + bias_scale**2 * self._G_Pcc_Gt
+            P[:m, m:] += bias_scale * self._G_Pcz
         P[m:, :m] = P[:m, m:].T
         self.P = P
 
