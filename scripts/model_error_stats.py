@@ -43,8 +43,12 @@ def run_once(cfg: Any, furnace: str, osc: bool, seed: int, setpoint: float, t_E:
 def main(argv: list[str] | None = None) -> int:
     from twin.config import load_config
     from twin.estimation.choice import estimator_model
-    from twin.experiments.model_error_stats import (bias_statistics, model_error_statistics, replay_metrics,
-                                                    replay_variants)
+    from twin.experiments.model_error_stats import (
+        bias_statistics,
+        model_error_statistics,
+        replay_metrics,
+        replay_variants,
+    )
     from twin.model.tables import model_tables
     from twin.radiation import radiation_model
     from twin.runs.record import load_arrays

@@ -276,9 +276,9 @@ def test_reported_predict_with_tc_deviations_and_model_bias_is_the_augmented_for
 
 def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
     """``[ekf.model_error]`` per mode (issue 25): an oscillating specimen's estimator reports with the q0 and
-    bias_variance of ``[ekf.model_error.oscillating]``, a fixed one's with its own; unset, both take the fixed ones.  The
-    bias's shape has zero rows for the calibrated parameters (it forces temperatures only).  Planted bug caught
-    here: ``for_mode`` handing the fixed specimen the oscillating values."""
+    bias_variance of ``[ekf.model_error.oscillating]``, a fixed one's with its own; unset, both take the fixed
+    ones.  The bias's shape has zero rows for the calibrated parameters (it forces temperatures only).  Planted
+    bug caught here: ``for_mode`` handing the fixed specimen the oscillating values."""
     from twin.config import small_config
     from twin.estimation.choice import build_estimator
     from twin.estimation.ekf import process_noise
@@ -322,13 +322,41 @@ def test_the_estimator_grows_the_reported_bias_with_its_temperature() -> None:
 
     base = small_config()
     tables = model_tables(base, radiation_model(base))
-    for overrides, expected in (({"ekf.model_error.bias_variance": [0.04], "ekf.model_error.bias_exponent": 2.0,
-                                  "ekf.model_error.bias_temperature": 300.0}, 4.0),
-                                ({"ekf.model_error.bias_variance": [0.04]}, 1.0),
-                                ({"ekf.model_error.bias_exponent": 2.0, "ekf.model_error.bias_temperature": 300.0}, 1.0)):
+    growth = {"ekf.model_error.bias_exponent": 2.0, "ekf.model_error.bias_temperature": 300.0}
+    for overrides, expected in (({"ekf.model_error.bias_variance": [0.04], **growth}, 4.0),
+                                ({"ekf.model_error.bias_variance": [0.04]}, 1.0), (growth, 1.0)):
         est = build_estimator(EstimatorChoice(), tables, None, base.with_overrides(overrides), 600.0)
-        seen: list[float] = []
+        seen: list[float | None] = []
         inner = est.reported.predict
-        est.reported.predict = lambda Phi, T=None, inner=inner: (seen.append(T), inner(Phi, T))[1]  # type: ignore
+
+        def spy(Phi: np.ndarray, T: float | None = None, inner=inner, seen=seen) -> None:  # type: ignore[no-untyped-def]
+            seen.append(T)
+            inner(Phi, T)
+
+        est.reported.predict = spy  # type: ignore[method-assign]
         est.predict(np.full(len(base.lamps.groups), 0.5), 0.0)
-        assert seen == [pytest.approx(600.0)] and est.reported.bias_scale(600.0) == pytest.approx(expected), overrides
+        assert seen == [pytest.approx(600.0)], overrides
+        assert est.reported.bias_scale(600.0) == pytest.approx(expected), overrides
+
+
+def test_the_per_node_bias_taken_as_a_slice_equals_the_dense_product() -> None:
+    """G = [G_shape | [I; 0]] (each node's own forcing, and a zero row for a parameter): predict takes the identity
+    block as a slice (``bias_identity``) and gives what the dense product gives.  Planted bug caught here: the
+    slice's term left out of P_xc G^T."""
+    rng = np.random.default_rng(9)
+    m = 4  # three nodes and one parameter
+    F = rng.normal(size=(m, m))
+    P, Phi = F @ F.T + np.eye(m), 0.9 * np.eye(m) + 0.05 * rng.normal(size=(m, m))
+    G = np.zeros((m, 2 + 3))
+    G[:3, :2] = rng.normal(size=(3, 2))
+    G[:3, 2:] = np.eye(3)
+    var = np.array([0.3, 0.1, 0.02, 0.02, 0.02])
+    C1 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    L = 0.5 * P @ C1.T @ np.linalg.inv(C1 @ P @ C1.T + R)
+    a, b = (ReportedCovariance(P, 0.01 * np.eye(m), bias_shape=G, bias_variance=var, bias_growth=(1000.0, 1.0),
+                               bias_identity=k) for k in (3, 0))
+    for rep in (a, b):
+        for T in (1000.0, 1200.0):
+            rep.predict(Phi, T)
+            rep.update(L, C1, R, np.array([0.2, -0.1]), np.array([True, True]))
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-12, atol=1e-12)

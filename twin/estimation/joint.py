@@ -106,7 +106,8 @@ class JointEstimator:
                 tc_tolerance=(me.tc_tolerance_fixed, me.tc_tolerance_relative) if me.tc_bias else None,
                 bias_shape=node_shape(fe, me.bias_degree if me.bias_variance else None, k, me.bias_node_variance > 0),
                 bias_variance=np.asarray(me.bias_variances(n), float),
-                bias_growth=(me.bias_temperature, me.bias_exponent))
+                bias_growth=(me.bias_temperature, me.bias_exponent),
+                bias_identity=n if me.bias_node_variance > 0 else 0)
         self._cov_dtype = np.float32 if e.covariance_precision == "single" else np.float64
         self._tol = e.jacobian_tolerance
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))

@@ -32,8 +32,9 @@ deviations as well: S_rep = C_a P^- C_a^T + R.
 specimen the model's steady heat balance is off by a forcing that stays the same for the run (the truth's lamp
 bands between the node lines, its view factors), so its one-step defect has a mean.  With ``bias_shape`` G (m, k)
 and ``bias_variance`` (k,) the reported covariance carries that forcing as k constant coefficients c,
-theta_{j+1} = F(theta_j, u_j) + s_j G c + w_j, unknown to the filter (its gain has zero rows for c; s_j = (T_j / T_ref)^p
-with T_j the mean of the estimated nodes: the bias grows with the temperature; p = 0: constant):
+theta_{j+1} = F(theta_j, u_j) + s_j G c + w_j, unknown to the filter (its gain has zero rows for c;
+s_j = (T_j / T_ref)^p with T_j the mean of the estimated nodes: the bias grows with the temperature; p = 0:
+constant):
 
     Phi_a = [[Phi, 0, s_j G], [0, I, 0], [0, 0, I]],   P_a0 = blkdiag(P0, beta's, diag(bias_variance))
 
@@ -91,11 +92,13 @@ class ReportedCovariance:
         states (module docstring); None: the readings are taken as unbiased
     bias_shape, bias_variance : G (m, k) and the variances (k,) of the model bias's constant coefficients
         (module docstring); None: no bias carried
+    bias_growth : (T_ref K, p) of the bias's growth with the temperature (:meth:`bias_scale`)
+    bias_identity : how many of G's last columns are [I; 0] (each node's own forcing; taken as a slice)
     """
 
     def __init__(self, P0: Array, Q: Array, readings: int = 0, tc_tolerance: tuple[float, float] | None = None,
                  bias_shape: Array | None = None, bias_variance: Array | None = None,
-                 bias_growth: tuple[float, float] = (1.0, 0.0)) -> None:
+                 bias_growth: tuple[float, float] = (1.0, 0.0), bias_identity: int = 0) -> None:
         P0 = np.asarray(P0, float)
         self.m = P0.shape[0]  # the filter's state; the consider states follow
         self.tc_tolerance = tc_tolerance
@@ -122,6 +125,13 @@ class ReportedCovariance:
             c = self.m + b
             self._G_Pcz = self.G @ self.P[c:, self.m:]
             self._G_Pcc_Gt = self._G_Pcz[:, b:] @ self.G.T
+            # the last ``bias_identity`` columns of G are [I; 0] (each node's own forcing): P_xc G^T takes them as
+            # a slice instead of a product (the dense product doubled the cost of a predict)
+            self._n_id = bias_identity
+            self._G_dense = self.G[:, : k - bias_identity]
+            if bias_identity and not (np.array_equal(self.G[:bias_identity, k - bias_identity:], np.eye(bias_identity))
+                                      and not self.G[bias_identity:, k - bias_identity:].any()):
+                raise ValueError("bias_identity: the last columns of bias_shape must be [I; 0]")
         self.Q = np.asarray(Q, float)
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
@@ -147,7 +157,10 @@ class ReportedCovariance:
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
         if self.G is not None:  # the bias's forcing G c enters the error: Phi_a's G block
-            X = P[:m, m + self.b:] @ (bias_scale * self.G.T)  # (Phi P_xc) (s G)^T
+            c, n_id = m + self.b, self._n_id
+            X = P[:m, c: P.shape[0] - n_id] @ (bias_scale * self._G_dense.T)  # (Phi P_xc) (s G)^T
+            if n_id:
+                X[:, :n_id] += bias_scale * P[:m, P.shape[0] - n_id:]
             P[:m, :m] += X + X.T + bias_scale**2 * self._G_Pcc_Gt
             P[:m, m:] += bias_scale * self._G_Pcz
         P[m:, :m] = P[:m, m:].T
