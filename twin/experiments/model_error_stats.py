@@ -27,7 +27,7 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,7 +82,7 @@ def defects(cfg: FurnaceConfig, ts: Mapping[str, Any], model: Any) -> tuple[Arra
     return np.asarray(out), resid[:, fillet.mask.ravel()]
 
 
-def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], model_for: Any) -> dict[str, Any]:
+def model_error_statistics(cfg: FurnaceConfig, runs: Sequence[Mapping[str, Any]], model_for: Any) -> dict[str, Any]:
     """``{"q0", "q1", "representation_rms", "samples", "defect_rms"}`` from runs (module docstring);
     ``model_for(ts)`` gives the estimator's model of a run (its oscillation)."""
     ds, rs = [], []
@@ -98,7 +98,7 @@ def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], mo
             "samples": len(d_all), "defect_rms": float(np.sqrt(np.mean(d_all**2)))}
 
 
-def bias_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], model_for: Any, degree: int,
+def bias_statistics(cfg: FurnaceConfig, runs: Sequence[Mapping[str, Any]], model_for: Any, degree: int,
                     temperature: float = 1000.0, exponent: float | None = None) -> dict[str, Any]:
     """The model's constant bias (``[ekf.model_error] bias_*``, :mod:`twin.estimation.model_bias`): each run's
     mean one-step defect over its steady window (1.5 t_E <= t <= 2 t_E, where the run's forcing error has
@@ -197,8 +197,8 @@ def replay_variants(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any, mode
     reports = _Reports([e.reported for e in ests])
     est.reported = reports  # type: ignore[assignment]  # the first filter drives every reported covariance
     n = est.n
-    uncs = [FieldUncertainty(est.model.fe, v.ekf.model_error.for_mode(sc.oscillation.enabled).representation_rms)
-            for v in variants]
+    mode_errors = [v.ekf.model_error.for_mode(sc.oscillation.enabled) for v in variants if v.ekf.model_error]
+    uncs = [FieldUncertainty(est.model.fe, me.representation_rms) for me in mode_errors]
     tf = np.asarray(ts["t_field"], float)
     shape = np.asarray(ts["field_hat"]).shape
     sigmas = [np.zeros(shape) for _ in variants]
