@@ -43,7 +43,12 @@ def run_once(cfg: Any, furnace: str, osc: bool, seed: int, setpoint: float, t_E:
 def main(argv: list[str] | None = None) -> int:
     from twin.config import load_config
     from twin.estimation.choice import estimator_model
-    from twin.experiments.model_error_stats import model_error_statistics, replay_metrics, replay_variants
+    from twin.experiments.model_error_stats import (
+        bias_statistics,
+        model_error_statistics,
+        replay_metrics,
+        replay_variants,
+    )
     from twin.model.tables import model_tables
     from twin.radiation import radiation_model
     from twin.runs.record import load_arrays
@@ -56,6 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", required=True)
     ap.add_argument("--references", nargs="+", default=["1100:120"], help="setpoint:t_E pairs (K:s)")
     ap.add_argument("--scales", type=float, nargs="+", default=[1.0, 5.0, 20.0])
+    ap.add_argument("--bias-degree", type=int, default=None,
+                    help="measure: also the model's constant bias of this Legendre degree (bias_statistics)")
+    ap.add_argument("--bias-scales", type=float, nargs="+", default=[1.0],
+                    help="measure: factors on the measured bias variances (with the white rest of the defect)")
+    ap.add_argument("--bias-growth", action="store_true",
+                    help="measure: the bias grows with the temperature (its exponent fitted to the runs)")
     ap.add_argument("--runs", type=Path, required=True, help="folder for the runs' time series (reused)")
     args = ap.parse_args(argv)
     cfg = load_config(None if args.config == "default" else args.config)
@@ -71,20 +82,38 @@ def main(argv: list[str] | None = None) -> int:
 
         stats = model_error_statistics(cfg, runs, model_for)
         sys.stdout.write(json.dumps(stats) + "\n")
-        # each scale of the measured q0, with the furnace file's TC tolerance (consider states; 0 = none)
         base = cfg.ekf.model_error.model_dump() if cfg.ekf.model_error is not None else {}
+        # every variant in the run's own mode (no [ekf.model_error.oscillating]: its fields stand for both)
+        base.update(oscillating=None, bias_degree=0, bias_variance=(), bias_node_variance=0.0)
+        # each scale of the measured one-step q0 alone (white), with the furnace file's TC tolerance (consider
+        # states; 0 = none)
+        labels = [{"scale": c} for c in args.scales]
         mes = [{**base, "q0": c * stats["q0"], "q1": stats["q1"], "representation_rms": stats["representation_rms"]}
                for c in args.scales]
+        if args.bias_degree is not None:
+            # the model's bias as consider states (shape and per node) and the white rest of the defect, each
+            # --bias-scales factor on the bias's variances
+            b = bias_statistics(cfg, runs, model_for, args.bias_degree, exponent=None if args.bias_growth else 0.0)
+            sys.stdout.write(json.dumps(b) + "\n")
+            for bs in args.bias_scales:
+                labels.append({"bias_scale": bs})
+                mes.append({**base, "q0": b["q0_white"], "q1": b["q1_white"],
+                            "representation_rms": stats["representation_rms"], "bias_degree": args.bias_degree,
+                            "bias_variance": tuple(bs * v for v in b["bias_variance"]),
+                            "bias_node_variance": bs * b["bias_node_variance"],
+                            "bias_temperature": b["bias_temperature"],
+                            "bias_exponent": b["bias_exponent"] if args.bias_growth else 0.0})
         per_run = [replay_variants(cfg, ts, tables, mes)[0] for ts in runs]  # one filter replay per run
-        for i, c in enumerate(args.scales):
+        for i, label in enumerate(labels):
             ms = [r[i] for r in per_run]
-            sys.stdout.write(json.dumps({"scale": c, **{k: [round(m[k], 4) for m in ms] for k in KEYS[:4]}}) + "\n")
+            sys.stdout.write(json.dumps({**label, **{k: [round(m[k], 4) for m in ms] for k in KEYS}}) + "\n")
         return 0
-    rows = ["| run | " + " | ".join(KEYS) + " |", "|---" * (len(KEYS) + 1) + "|"]
+    # the last column: the largest |replayed - stored estimate| (K): 0 when the replay is the run's own filter
+    rows = ["| run | " + " | ".join(KEYS) + " | replay deviation |", "|---" * (len(KEYS) + 2) + "|"]
     for p, ts in zip(paths, runs, strict=True):
-        m, _ = replay_metrics(cfg, ts, tables)
+        m, deviation = replay_metrics(cfg, ts, tables)
         cells = [f"{m[k]:.3f}" if k.startswith(("coverage", "nees", "nis")) else f"{100 * m[k]:.2f} %" for k in KEYS]
-        rows.append(f"| {p.stem} | " + " | ".join(cells) + " |")
+        rows.append(f"| {p.stem} | " + " | ".join(cells) + f" | {deviation:.1e} K |")
     sys.stdout.write("\n".join(rows) + "\n")
     return 0
 

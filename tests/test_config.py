@@ -110,7 +110,12 @@ def test_banded_furnace_is_the_default_with_five_lamp_values_changed(cfg):
                        "lamps.vertical.heated_length", "lamps.vertical.distance",
                        # (issue 26: banded is controlled as the default furnace, its [control] overrides nothing)
                        # and its own measured model error for the reported covariance (issue 25)
-                       "ekf.model_error.q0", "ekf.model_error.q1", "ekf.model_error.representation_rms"}
+                       "ekf.model_error.q0", "ekf.model_error.q1", "ekf.model_error.representation_rms",
+                       # with its model's bias as consider states, and its oscillating specimen's own values
+                       "ekf.model_error.bias_degree", "ekf.model_error.bias_variance",
+                       "ekf.model_error.bias_node_variance", "ekf.model_error.oscillating.q0",
+                       "ekf.model_error.oscillating.q1", "ekf.model_error.oscillating.representation_rms",
+                       "ekf.model_error.oscillating.bias_variance", "ekf.model_error.oscillating.bias_node_variance"}
     assert banded.lamps.horizontal.distance < cfg.lamps.horizontal.distance  # the point of the variant
     assert load_config("default") == cfg
 

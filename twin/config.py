@@ -303,11 +303,32 @@ class FE(_Section):
         return self
 
 
+def _bias_count(degree: int) -> int:
+    """Coefficients of the Legendre shape of total ``degree`` (twin.estimation.model_bias.terms)."""
+    return (degree + 1) * (degree + 2) // 2
+
+
+class ModeModelError(_Section):
+    """The oscillating specimen's own model error (``[ekf.model_error.oscillating]``): each field set replaces
+    the fixed specimen's (moving, the specimen averages the lamps and the model's error is another)."""
+
+    q0: float | None = Field(None, gt=0)
+    q1: float | None = Field(None, ge=0)
+    bias_variance: tuple[float, ...] | None = None
+    bias_node_variance: float | None = Field(None, ge=0)
+    representation_rms: float | None = Field(None, ge=0)
+
+
 class ModelError(_Section):
     """Measured model-error statistics for the *reported* covariance (twin.estimation.process_noise).
 
     Q_rep = q0 (q1 sign(M) + 1 1^T)^2 (the form of the filter's Q, constants from the measured one-step
-    error of the model against the truth) and the FE grid's representation error ``representation_rms`` (K)."""
+    error of the model against the truth) and the FE grid's representation error ``representation_rms`` (K).
+    The model's constant bias (consider states, twin.estimation.model_bias): a Legendre shape of total degree
+    ``bias_degree`` over the specimen with one variance per coefficient (``bias_variance``, in
+    ``model_bias.terms`` order; empty: none) and a constant forcing of each node on its own
+    (``bias_node_variance``; 0: none), K^2 per sample^2.  ``oscillating`` holds the oscillating specimen's own
+    values (:class:`ModeModelError`); :meth:`for_mode` resolves them."""
 
     q0: float = Field(gt=0)
     q1: float = Field(ge=0)
@@ -316,11 +337,43 @@ class ModelError(_Section):
     # states of the reported covariance (twin.estimation.thermocouple_tolerance); both 0 = left out
     tc_tolerance_fixed: float = Field(0.0, ge=0, le=50.0, description="K")
     tc_tolerance_relative: float = Field(0.0, ge=0, le=0.05, description="fraction of |t| in C")
+    bias_degree: int = Field(0, ge=0, le=4)
+    bias_variance: tuple[float, ...] = ()
+    bias_node_variance: float = Field(0.0, ge=0)
+    # the bias grows with the temperature: its forcing is G c (T / bias_temperature)^bias_exponent, T the mean of
+    # the estimated nodes (the variances above hold at bias_temperature); exponent 0: constant
+    bias_temperature: float = Field(1000.0, gt=0, description="K")
+    bias_exponent: float = Field(0.0, ge=0, le=8)
+    oscillating: ModeModelError | None = None  # None: the fixed specimen's values serve both
+
+    @model_validator(mode="after")
+    def _bias(self) -> Self:
+        k = _bias_count(self.bias_degree)
+        for name, v in (("bias_variance", self.bias_variance),
+                        ("oscillating.bias_variance", self.oscillating and self.oscillating.bias_variance)):
+            if v and len(v) != k:
+                raise ValueError(f"{name}: {k} variances for bias_degree = {self.bias_degree}, got {len(v)}")
+            if v and any(x < 0 for x in v):
+                raise ValueError(f"{name}: variances must be >= 0")
+        return self
 
     @property
     def tc_bias(self) -> bool:
         """True when the TCs' deviations are carried (a tolerance is stated)."""
         return self.tc_tolerance_fixed > 0 or self.tc_tolerance_relative > 0
+
+    def for_mode(self, oscillating: bool) -> ModelError:
+        """The constants of a fixed or an oscillating specimen: with ``oscillating`` the fields set in
+        ``[ekf.model_error.oscillating]`` replace the fixed specimen's."""
+        if not oscillating or self.oscillating is None:
+            return self
+        own = {k: v for k, v in self.oscillating.model_dump().items() if v is not None}
+        return self.model_copy(update={**own, "oscillating": None})
+
+    def bias_variances(self, nodes: int) -> tuple[float, ...]:
+        """The variances of the bias's coefficients: the shape's (``bias_variance``), then one per node with
+        ``bias_node_variance`` (the columns of :func:`twin.estimation.model_bias.node_shape`); empty: no bias."""
+        return tuple(self.bias_variance) + ((self.bias_node_variance,) * nodes if self.bias_node_variance else ())
 
 
 class EKFWeights(_Section):

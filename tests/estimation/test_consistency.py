@@ -84,10 +84,12 @@ def test_coverage_and_cell_nees() -> None:
     np.testing.assert_allclose(z, [0.0, (2.5 / 2) ** 2])
 
 
-def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
+@pytest.mark.parametrize("bias", [False, True])
+def test_the_reported_covariance_leaves_the_estimate_bit_for_bit(bias: bool) -> None:
     """[ekf.model_error] changes what the twin reports, never its estimate: the joint filter with and without it
     (small furnace, calibrating, position-aware, 30 samples of a heat-up with a reading 2 K off) gives identical
-    theta and filter P, while the reported covariance differs from the filter's."""
+    theta and filter P, while the reported covariance differs from the filter's; also with the model's bias
+    carried (shape and per node, consider states)."""
     from twin.config import small_config
     from twin.estimation.choice import build_estimator
     from twin.model.tables import model_tables
@@ -95,6 +97,9 @@ def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
     from twin.scenario import EstimatorChoice
 
     cfg = small_config()
+    if bias:
+        cfg = cfg.with_overrides({"ekf.model_error.bias_degree": 1, "ekf.model_error.bias_variance": [0.04, 1e-3, 1e-3],
+                                  "ekf.model_error.bias_node_variance": 2e-3})
     assert cfg.ekf.model_error is not None
     plain = cfg.with_overrides({"ekf.model_error": None})
     tables = model_tables(cfg, radiation_model(cfg))
@@ -111,6 +116,7 @@ def test_the_reported_covariance_leaves_the_estimate_bit_for_bit() -> None:
     np.testing.assert_array_equal(a.state.P, b.state.P)
     np.testing.assert_array_equal(b.reported_P, b.state.P)  # without model error the filter's P is reported
     assert not np.allclose(a.reported_P, a.state.P)
+    assert a.reported.P.shape[0] == a.n + a.k + 3 + (3 + a.n if bias else 0)  # TCs' deviations, the bias
 
 
 #: faster dynamics for the deviations' test: the cross-covariance of error and deviations then decays between
@@ -186,3 +192,171 @@ def test_reported_nis_and_consider_update_with_every_reading_and_with_one_missin
     S1 = C1 @ Pa @ C1.T + R
     assert one.nis == pytest.approx(0.3**2 / S1[0, 0], rel=1e-12)
     assert np.all(np.isfinite(one.P))
+
+
+#: the model bias's shape: a forcing on the unobserved middle state (and half of it on the third)
+G_BIAS = np.array([[0.0], [1.0], [0.5]])
+BIAS_VARIANCE = 0.5
+
+
+def _simulate_model_bias(carried: bool, seed: int, runs: int = 200, steps: int = 40) -> np.ndarray:
+    """Monte Carlo of the system above whose dynamics have a constant forcing G_BIAS c per run
+    (c ~ N(0, BIAS_VARIANCE), the filter does not know it: the model's own bias); returns per step the mean NEES
+    of the estimate against the reported covariance (the true Q, with or without the bias as consider states).
+    The filter is linear and ungated, so its gains and the reported covariance are the same in every run: one
+    filter gives them, the runs' states and estimates are propagated together."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros(steps)
+    LQ, LR = np.linalg.cholesky(Q_TRUE), np.sqrt(np.diag(R))
+    x = rng.standard_normal((runs, 3))
+    c = rng.normal(0.0, np.sqrt(BIAS_VARIANCE), (runs, 1))
+    x_hat = np.zeros((runs, 3))
+    state = EKFState(np.zeros(3), np.eye(3))
+    report = ReportedCovariance(np.eye(3), Q_TRUE, bias_shape=G_BIAS if carried else None,
+                                bias_variance=np.array([BIAS_VARIANCE]) if carried else None)
+    for k in range(steps):
+        x = x @ A.T + c @ G_BIAS.T + rng.standard_normal((runs, 3)) @ LQ.T
+        x_hat = x_hat @ A.T
+        state = EKFState(A @ state.theta, A @ state.P @ A.T + Q_TRUE)
+        report.predict(A)
+        y = x @ C.T + LR * rng.standard_normal((runs, 2))
+        state, info = ekf_update(state, y[0], C, R, gate=np.inf)
+        report.update(info.gain, C, R, info.innovation, info.used, y[0])
+        x_hat = x_hat + (y - x_hat @ C.T) @ info.gain.T
+        out[k] = np.mean([nees(e, report.P[:3, :3]) for e in x_hat - x])
+    return out
+
+
+def test_a_model_bias_carried_as_consider_states_makes_the_reported_covariance_consistent() -> None:
+    """The model misses a forcing that is constant for the run (banded's structured error, issue 25): the filter,
+    matched to the white noise, leaves a steady error where its sensors do not read.  Without the bias in the
+    reported covariance the NEES leaves the chi-square region; with it as Schmidt-Kalman consider states
+    (Phi_a's G block, process_noise module docstring) it stays inside (c Gaussian here, so the NEES is
+    chi-square).  Planted bugs that fail it (and the exact test below): the cross-covariance of error and bias
+    not propagated (``P[:m, m:] += G P_cz`` left out of ``predict``), the cross terms X + X^T left out of P_xx,
+    the bias's own term G P_cc G^T left out."""
+    lo, hi = chi2_interval(dof=3, runs=200, probability=0.99)
+    without = _simulate_model_bias(False, seed=31)
+    assert np.mean(without[20:] > hi) > 0.9, without
+    carried = _simulate_model_bias(True, seed=31)
+    assert np.sum((carried < lo) | (carried > hi)) <= 2, carried
+
+
+def test_reported_predict_with_tc_deviations_and_model_bias_is_the_augmented_form_written_out() -> None:
+    """Phi_a P_a Phi_a^T + Q_a with Phi_a = [[Phi, 0, s G], [0, I, 0], [0, 0, I]] (the state, the TCs' deviations,
+    the bias's coefficients; s the bias's growth with the temperature) after an update that correlated them all;
+    then the update with C_a = [C, tol, 0].  Planted bugs caught here: G P_cc G^T left out of ``predict``; the
+    growth s applied to the cross terms but not to G P_cz."""
+    rng = np.random.default_rng(7)
+    F = rng.normal(size=(3, 3))
+    P = F @ F.T + np.eye(3)
+    G = rng.normal(size=(3, 2))
+    var = np.array([0.4, 0.2])
+    L = 0.5 * P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    rep = ReportedCovariance(P, Q_TRUE, readings=2, tc_tolerance=(1.5, 0.0), bias_shape=G, bias_variance=var,
+                             bias_growth=(1000.0, 2.0))
+    Pa = np.zeros((7, 7))
+    Pa[:3, :3], Pa[3:5, 3:5], Pa[5:, 5:] = P, np.eye(2) / 3.0, np.diag(var)
+    np.testing.assert_array_equal(rep.P, Pa)
+    Ca = np.concatenate([C, 1.5 * np.eye(2), np.zeros((2, 2))], axis=1)
+    La = np.concatenate([L, np.zeros((4, 2))])
+    Qa = np.zeros((7, 7))
+    Qa[:3, :3] = Q_TRUE
+    for T, scale in ((None, 1.0), (1100.0, 1.21)):  # the second round from a P_a with every block filled, the
+        Phi_a = np.eye(7)                              # bias grown by (1100 / 1000)^2
+        Phi_a[:3, :3], Phi_a[:3, 5:] = A, scale * G
+        rep.predict(A, T)
+        Pa = Phi_a @ Pa @ Phi_a.T + Qa
+        np.testing.assert_allclose(rep.P, Pa, rtol=1e-12, atol=1e-12)
+        rep.update(L, C, R, np.array([0.3, -0.2]), np.array([True, True]), np.array([300.0, 301.0]))
+        I_LC = np.eye(7) - La @ Ca
+        Pa = I_LC @ Pa @ I_LC.T + La @ R @ La.T
+        np.testing.assert_allclose(rep.P, Pa, rtol=1e-12, atol=1e-12)
+
+
+def test_the_reported_covariance_takes_the_specimen_modes_model_error() -> None:
+    """``[ekf.model_error]`` per mode (issue 25): an oscillating specimen's estimator reports with the q0 and
+    bias_variance of ``[ekf.model_error.oscillating]``, a fixed one's with its own; unset, both take the fixed
+    ones.  The bias's shape has zero rows for the calibrated parameters (it forces temperatures only).  Planted
+    bug caught here: ``for_mode`` handing the fixed specimen the oscillating values."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.estimation.ekf import process_noise
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice, OscillationSpec
+
+    cfg = small_config().with_overrides({"ekf.model_error.q0": 2e-4, "ekf.model_error.bias_degree": 1,
+                                         "ekf.model_error.bias_variance": [1e-4, 2e-4, 3e-4],
+                                         "ekf.model_error.oscillating": {"q0": 5e-5, "representation_rms": 0.25,
+                                                                         "bias_variance": [0.0, 0.0, 1e-5]}})
+    me = cfg.ekf.model_error
+    assert me.for_mode(False).representation_rms == me.representation_rms != 0.25  # the σ map's r per mode
+    assert me.for_mode(True).representation_rms == 0.25 and me.for_mode(True).q1 == me.q1  # unset: the fixed one
+    tables = model_tables(cfg, radiation_model(cfg))
+    q1 = cfg.ekf.model_error.q1
+    for osc, q0, var in ((None, 2e-4, [1e-4, 2e-4, 3e-4]), (OscillationSpec(enabled=False), 2e-4, [1e-4, 2e-4, 3e-4]),
+                         (OscillationSpec(enabled=True), 5e-5, [0.0, 0.0, 1e-5])):
+        est = build_estimator(EstimatorChoice(calibrate=True), tables, osc, cfg, 300.0)
+        rep, n, k = est.reported, est.n, est.k
+        assert rep is not None and k > 0 and rep.G is not None
+        np.testing.assert_allclose(rep.Q[:n, :n], process_noise(est.model.fe.M, q0, q1), rtol=1e-12)
+        np.testing.assert_array_equal(np.diag(rep.P)[-3:], var)
+        assert rep.G.shape == (n + k, 3) and not rep.G[n:].any() and np.allclose(rep.G[:n, 0], 1.0)
+    plain = cfg.with_overrides({"ekf.model_error.oscillating": None})
+    est = build_estimator(EstimatorChoice(), tables, OscillationSpec(enabled=True), plain, 300.0)
+    np.testing.assert_allclose(est.reported.Q[:est.n, :est.n], process_noise(est.model.fe.M, 2e-4, q1), rtol=1e-12)
+    with pytest.raises(ValueError, match="bias_variance"):
+        cfg.with_overrides({"ekf.model_error.bias_degree": 2})  # 3 variances for 6 terms
+
+
+def test_the_estimator_grows_the_reported_bias_with_its_temperature() -> None:
+    """``bias_exponent`` p: the bias's forcing this step is (mean of the estimated nodes / bias_temperature)^p
+    times its value at bias_temperature; p = 0 or no bias carried: 1.  The estimator hands its mean temperature
+    to the reported covariance.  Planted bug caught here: the ratio inverted (bias_temperature / T)."""
+    from twin.config import small_config
+    from twin.estimation.choice import build_estimator
+    from twin.model.tables import model_tables
+    from twin.radiation import radiation_model
+    from twin.scenario import EstimatorChoice
+
+    base = small_config()
+    tables = model_tables(base, radiation_model(base))
+    growth = {"ekf.model_error.bias_exponent": 2.0, "ekf.model_error.bias_temperature": 300.0}
+    for overrides, expected in (({"ekf.model_error.bias_variance": [0.04], **growth}, 4.0),
+                                ({"ekf.model_error.bias_variance": [0.04]}, 1.0), (growth, 1.0)):
+        est = build_estimator(EstimatorChoice(), tables, None, base.with_overrides(overrides), 600.0)
+        seen: list[float | None] = []
+        inner = est.reported.predict
+
+        def spy(Phi: np.ndarray, T: float | None = None, inner=inner, seen=seen) -> None:  # type: ignore[no-untyped-def]
+            seen.append(T)
+            inner(Phi, T)
+
+        est.reported.predict = spy  # type: ignore[method-assign]
+        est.predict(np.full(len(base.lamps.groups), 0.5), 0.0)
+        assert seen == [pytest.approx(600.0)], overrides
+        assert est.reported.bias_scale(600.0) == pytest.approx(expected), overrides
+
+
+def test_the_per_node_bias_taken_as_a_slice_equals_the_dense_product() -> None:
+    """G = [G_shape | [I; 0]] (each node's own forcing, and a zero row for a parameter): predict takes the identity
+    block as a slice (``bias_identity``) and gives what the dense product gives.  Planted bug caught here: the
+    slice's term left out of P_xc G^T."""
+    rng = np.random.default_rng(9)
+    m = 4  # three nodes and one parameter
+    F = rng.normal(size=(m, m))
+    P, Phi = F @ F.T + np.eye(m), 0.9 * np.eye(m) + 0.05 * rng.normal(size=(m, m))
+    G = np.zeros((m, 2 + 3))
+    G[:3, :2] = rng.normal(size=(3, 2))
+    G[:3, 2:] = np.eye(3)
+    var = np.array([0.3, 0.1, 0.02, 0.02, 0.02])
+    C1 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    L = 0.5 * P @ C1.T @ np.linalg.inv(C1 @ P @ C1.T + R)
+    a, b = (ReportedCovariance(P, 0.01 * np.eye(m), bias_shape=G, bias_variance=var, bias_growth=(1000.0, 1.0),
+                               bias_identity=k) for k in (3, 0))
+    for rep in (a, b):
+        for T in (1000.0, 1200.0):
+            rep.predict(Phi, T)
+            rep.update(L, C1, R, np.array([0.2, -0.1]), np.array([True, True]))
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-12, atol=1e-12)

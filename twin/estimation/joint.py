@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from twin.config import FurnaceConfig
 from twin.estimation.ekf import EKFState, UpdateInfo, ekf_update, process_noise, propagate_covariance
+from twin.estimation.model_bias import node_shape
 from twin.estimation.process_noise import ReportedCovariance, reported_process_noise
 from twin.model.parametric import Evaluation, ParametricModel
 from twin.model.tables import PARAMETERS, Parameters
@@ -97,10 +98,16 @@ class JointEstimator:
         #: the covariance the twin reports (twin.estimation.process_noise), None: the filter's own P is reported
         self.reported: ReportedCovariance | None = None
         if e.model_error is not None:
-            me = e.model_error
+            # the specimen's mode: the model's error is smaller when it moves (averaged over the lamps)
+            osc = model.oscillation
+            me = e.model_error.for_mode(osc is not None and bool(osc.enabled))
             self.reported = ReportedCovariance(
                 P0, reported_process_noise(fe.M, me, self.Q[n:, n:]), readings=C.shape[0],
-                tc_tolerance=(me.tc_tolerance_fixed, me.tc_tolerance_relative) if me.tc_bias else None)
+                tc_tolerance=(me.tc_tolerance_fixed, me.tc_tolerance_relative) if me.tc_bias else None,
+                bias_shape=node_shape(fe, me.bias_degree if me.bias_variance else None, k, me.bias_node_variance > 0),
+                bias_variance=np.asarray(me.bias_variances(n), float),
+                bias_growth=(me.bias_temperature, me.bias_exponent),
+                bias_identity=n if me.bias_node_variance > 0 else 0)
         self._cov_dtype = np.float32 if e.covariance_precision == "single" else np.float64
         self._tol = e.jacobian_tolerance
         self._lin: tuple[float, Array] | None = None  # (convection it was built for, I + t_s L(p))
@@ -192,7 +199,7 @@ class JointEstimator:
         theta_next = theta + self.model.t_s * e.rate
         P = propagate_covariance(Phi, self._x.P, self.Q)
         if self.reported is not None:
-            self.reported.predict(Phi)
+            self.reported.predict(Phi, float(np.mean(theta)))  # the bias's growth at the estimate's temperature
         self._x = EKFState(np.concatenate([theta_next, self._x.theta[n:]]), P)
         return self.state
 

@@ -28,6 +28,19 @@ gain has zero rows for beta (it does not estimate them, so the estimate is uncha
 in the same Joseph form, which is exact for this gain.  The innovation's covariance then includes the
 deviations as well: S_rep = C_a P^- C_a^T + R.
 
+**The model's own bias (consider states as well).**  Part of the model's error is not white either: on a fixed
+specimen the model's steady heat balance is off by a forcing that stays the same for the run (the truth's lamp
+bands between the node lines, its view factors), so its one-step defect has a mean.  With ``bias_shape`` G (m, k)
+and ``bias_variance`` (k,) the reported covariance carries that forcing as k constant coefficients c,
+theta_{j+1} = F(theta_j, u_j) + s_j G c + w_j, unknown to the filter (its gain has zero rows for c;
+s_j = (T_j / T_ref)^p with T_j the mean of the estimated nodes: the bias grows with the temperature; p = 0:
+constant):
+
+    Phi_a = [[Phi, 0, s_j G], [0, I, 0], [0, 0, I]],   P_a0 = blkdiag(P0, beta's, diag(bias_variance))
+
+with C_a = [C, diag(tol(y)), 0].  The TCs correct the bias where they read; the rest (between them) stays in the
+error and in its reported covariance (:mod:`twin.estimation.model_bias`: the basis and its measured variance).
+
 Example
 -------
 >>> import numpy as np
@@ -77,23 +90,64 @@ class ReportedCovariance:
     readings : number of TCs the filter reads (the consider states' count; needed with ``tc_tolerance``)
     tc_tolerance : (fixed K, relative of |t| in C) of the TCs' datasheet: carry their deviations as consider
         states (module docstring); None: the readings are taken as unbiased
+    bias_shape, bias_variance : G (m, k) and the variances (k,) of the model bias's constant coefficients
+        (module docstring); None: no bias carried
+    bias_growth : (T_ref K, p) of the bias's growth with the temperature (:meth:`bias_scale`)
+    bias_identity : how many of G's last columns are [I; 0] (each node's own forcing; taken as a slice)
     """
 
     def __init__(self, P0: Array, Q: Array, readings: int = 0, tc_tolerance: tuple[float, float] | None = None,
-                 ) -> None:
+                 bias_shape: Array | None = None, bias_variance: Array | None = None,
+                 bias_growth: tuple[float, float] = (1.0, 0.0), bias_identity: int = 0) -> None:
         P0 = np.asarray(P0, float)
         self.m = P0.shape[0]  # the filter's state; the consider states follow
         self.tc_tolerance = tc_tolerance
         b = readings if tc_tolerance is not None else 0
-        self.P = np.zeros((self.m + b, self.m + b))
+        self.b = b  # the TCs' deviations, then the model bias's k coefficients
+        #: G (m, k) of the model bias (module docstring), None: no bias carried
+        self.G: Array | None = None
+        #: (T_ref K, p): the bias's forcing at the mean temperature T is (T / T_ref)^p times its value at T_ref
+        self.bias_growth = bias_growth
+        k = 0
+        if bias_shape is not None and bias_variance is not None and len(bias_variance):
+            self.G = np.asarray(bias_shape, float)
+            k = self.G.shape[1]
+            if self.G.shape[0] != self.m or len(bias_variance) != k:
+                raise ValueError(f"bias_shape must be ({self.m}, k) and bias_variance (k,): "
+                                 f"{self.G.shape}, {len(bias_variance)}")
+        self.P = np.zeros((self.m + b + k, self.m + b + k))
         self.P[: self.m, : self.m] = P0
-        self.P[self.m:, self.m:] = BETA_VARIANCE * np.eye(b)
+        self.P[self.m: self.m + b, self.m: self.m + b] = BETA_VARIANCE * np.eye(b)
+        self.P[self.m + b:, self.m + b:] = np.diag(np.asarray(bias_variance if k else [], float))
+        # the consider states' block never changes (zero gain rows, identity dynamics): G P_cz and G P_cc G^T of
+        # predict are constants
+        if self.G is not None:
+            c = self.m + b
+            self._G_Pcz = self.G @ self.P[c:, self.m:]
+            self._G_Pcc_Gt = self._G_Pcz[:, b:] @ self.G.T
+            # the last ``bias_identity`` columns of G are [I; 0] (each node's own forcing): P_xc G^T takes them as
+            # a slice instead of a product (the dense product doubled the cost of a predict)
+            self._n_id = bias_identity
+            self._G_dense = self.G[:, : k - bias_identity]
+            if bias_identity and not (np.array_equal(self.G[:bias_identity, k - bias_identity:], np.eye(bias_identity))
+                                      and not self.G[bias_identity:, k - bias_identity:].any()):
+                raise ValueError("bias_identity: the last columns of bias_shape must be [I; 0]")
         self.Q = np.asarray(Q, float)
         #: NIS of the last update against the reported covariance (NaN when no reading was used)
         self.nis = float("nan")
 
-    def predict(self, Phi: NDArray[np.floating[Any]]) -> None:
-        """P^- = Phi P Phi^T + Q_rep (15); the deviations stay what they were (Phi_a of the module docstring)."""
+    def bias_scale(self, temperature: float | None) -> float:
+        """s_j of the module docstring: (T / T_ref)^p of ``bias_growth`` at the mean temperature T (K) of the
+        estimate; 1 without a bias, without growth or without a temperature."""
+        T_ref, p = self.bias_growth
+        if self.G is None or not p or temperature is None:
+            return 1.0
+        return float((temperature / T_ref) ** p)
+
+    def predict(self, Phi: NDArray[np.floating[Any]], temperature: float | None = None) -> None:
+        """P^- = Phi P Phi^T + Q_rep (15); the deviations stay what they were (Phi_a of the module docstring);
+        ``temperature`` (K, the estimate's mean) sets the bias's growth s_j (:meth:`bias_scale`)."""
+        bias_scale = self.bias_scale(temperature)
         m = self.m
         if self.P.shape[0] == m:
             self.P = propagate_covariance(Phi, self.P, self.Q)
@@ -102,6 +156,13 @@ class ReportedCovariance:
         P[m:, m:] = self.P[m:, m:]
         P[:m, :m] = propagate_covariance(Phi, self.P[:m, :m], self.Q)
         P[:m, m:] = np.asarray(Phi @ self.P[:m, m:].astype(Phi.dtype), float)
+        if self.G is not None:  # the bias's forcing G c enters the error: Phi_a's G block
+            c, n_id = m + self.b, self._n_id
+            X = P[:m, c: P.shape[0] - n_id] @ (bias_scale * self._G_dense.T)  # (Phi P_xc) (s G)^T
+            if n_id:
+                X[:, :n_id] += bias_scale * P[:m, P.shape[0] - n_id:]
+            P[:m, :m] += X + X.T + bias_scale**2 * self._G_Pcc_Gt
+            P[:m, m:] += bias_scale * self._G_Pcz
         P[m:, :m] = P[:m, m:].T
         self.P = P
 
@@ -109,7 +170,7 @@ class ReportedCovariance:
                readings: Array | None = None) -> None:
         """Joseph form (13) with the filter's gain (n, p; zero columns for readings left out) and the NIS;
         ``readings`` (K, the TCs' values) set tol(y) of the consider states (required with them)."""
-        b = self.P.shape[0] - self.m
+        b, z = self.b, self.P.shape[0] - self.m
         if b:
             if readings is None:
                 raise ValueError("the TCs' deviations are carried: update needs the readings")
@@ -117,7 +178,10 @@ class ReportedCovariance:
             if not np.isfinite(tol).all():  # a missing reading: no deviation to carry
                 tol = np.nan_to_num(tol, nan=0.0)
             C = np.concatenate([C, np.diag(tol)], axis=1)
-            gain = np.concatenate([gain, np.zeros((b, gain.shape[1]))], axis=0)
+        if z > b:  # the TCs read the field, not the bias's coefficients
+            C = np.concatenate([C, np.zeros((C.shape[0], z - b))], axis=1)
+        if z:
+            gain = np.concatenate([gain, np.zeros((z, gain.shape[1]))], axis=0)
         PCt = self.P @ C.T
         S = C @ PCt + R
         if used.all():  # the normal case: no fancy indexing (it costs more than the algebra at p = 3)

@@ -27,7 +27,7 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,7 +82,7 @@ def defects(cfg: FurnaceConfig, ts: Mapping[str, Any], model: Any) -> tuple[Arra
     return np.asarray(out), resid[:, fillet.mask.ravel()]
 
 
-def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], model_for: Any) -> dict[str, Any]:
+def model_error_statistics(cfg: FurnaceConfig, runs: Sequence[Mapping[str, Any]], model_for: Any) -> dict[str, Any]:
     """``{"q0", "q1", "representation_rms", "samples", "defect_rms"}`` from runs (module docstring);
     ``model_for(ts)`` gives the estimator's model of a run (its oscillation)."""
     ds, rs = [], []
@@ -96,6 +96,52 @@ def model_error_statistics(cfg: FurnaceConfig, runs: list[Mapping[str, Any]], mo
     q0, q1 = fit_form(D, np.sign(np.asarray(fe.M, float)))
     return {"q0": q0, "q1": q1, "representation_rms": float(np.sqrt(np.mean(np.concatenate(rs) ** 2))),
             "samples": len(d_all), "defect_rms": float(np.sqrt(np.mean(d_all**2)))}
+
+
+def bias_statistics(cfg: FurnaceConfig, runs: Sequence[Mapping[str, Any]], model_for: Any, degree: int,
+                    temperature: float = 1000.0, exponent: float | None = None) -> dict[str, Any]:
+    """The model's constant bias (``[ekf.model_error] bias_*``, :mod:`twin.estimation.model_bias`): each run's
+    mean one-step defect over its steady window (1.5 t_E <= t <= 2 t_E, where the run's forcing error has
+    settled and the noise averages out) fitted by the Legendre shape of ``degree`` at the nodes (least squares).
+    The bias grows with the temperature: each run's mean is divided by (T_r / ``temperature``)^p, T_r the mean of
+    the truth's best node values over the window, p = ``exponent`` or, None, fitted to the runs (log of the mean's
+    rms against log T_r; 0 with a single temperature).  Returns
+    ``{"bias_variance": mean over the runs of each coefficient squared, "coefficients": per run,
+    "bias_node_variance": mean square of what the shape leaves of the runs' means (each node's own constant
+    forcing), "bias_temperature", "bias_exponent", "mean_rms": rms of the runs' mean defects (not scaled),
+    "q0_white", "q1_white": the form of Q fitted to the steady window's defects less their run's mean (what is
+    left of the defect once the bias is carried)}`` (K per sample, at ``temperature``)."""
+    from twin.estimation.model_bias import node_shape
+
+    means, temps, centred = [], [], []
+    for ts in runs:
+        model = model_for(ts)
+        d, _ = defects(cfg, ts, model)
+        tf = np.asarray(ts["t_field"], float)
+        t_E = float(ts["t_E"])
+        # the sample time of each defect (defects keeps the j with a field one step later)
+        t_j = tf[:-1][np.abs(np.diff(tf) - cfg.sampling.t_s) <= 1e-6]
+        steady = d[(t_j >= 1.5 * t_E - 1e-9) & (t_j <= 2.0 * t_E + 1e-9)]
+        mean = steady.mean(axis=0)
+        centred.append(steady - mean)
+        means.append(mean)
+        window = (tf >= 1.5 * t_E - 1e-9) & (tf <= 2.0 * t_E + 1e-9)
+        truth = np.asarray(ts["field_true"], float)[window].reshape(int(window.sum()), -1)
+        temps.append(float(np.mean(truth @ np.linalg.pinv(np.asarray(model.fe.M_theta, float)).T)))
+    T = np.asarray(temps)
+    rms = np.sqrt(np.mean(np.square(means), axis=1))
+    if exponent is None:
+        exponent = float(np.polyfit(np.log(T), np.log(rms), 1)[0]) if np.ptp(T) > 1.0 else 0.0
+    G = node_shape(model.fe, degree)
+    scaled = np.asarray(means) / ((T / temperature) ** exponent)[:, None]
+    C = np.linalg.lstsq(G, scaled.T, rcond=None)[0].T
+    resid = scaled - C @ G.T
+    w = np.concatenate(centred)
+    q0_white, q1_white = fit_form(w.T @ w / len(w), np.sign(np.asarray(model.fe.M, float)))
+    return {"bias_variance": [float(v) for v in np.mean(C**2, axis=0)], "coefficients": C.tolist(),
+            "bias_node_variance": float(np.mean(np.square(resid))), "bias_temperature": float(temperature),
+            "bias_exponent": float(exponent), "mean_rms": float(np.sqrt(np.mean(np.square(means)))),
+            "q0_white": q0_white, "q1_white": q1_white}
 
 
 def replay_metrics(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any) -> tuple[dict[str, Any], float]:
@@ -122,9 +168,9 @@ class _Reports:
     def nis(self) -> float:
         return float(self.members[0].nis)
 
-    def predict(self, Phi: Any) -> None:
-        for r in self.members:
-            r.predict(Phi)
+    def predict(self, Phi: Any, temperature: float | None = None) -> None:
+        for r in self.members:  # each with its own bias growth
+            r.predict(Phi, temperature)
 
     def update(self, *args: Any) -> None:
         for r in self.members:
@@ -151,7 +197,8 @@ def replay_variants(cfg: FurnaceConfig, ts: Mapping[str, Any], tables: Any, mode
     reports = _Reports([e.reported for e in ests])
     est.reported = reports  # type: ignore[assignment]  # the first filter drives every reported covariance
     n = est.n
-    uncs = [FieldUncertainty(est.model.fe, getattr(v.ekf.model_error, "representation_rms", 0.0)) for v in variants]
+    mode_errors = [v.ekf.model_error.for_mode(sc.oscillation.enabled) for v in variants if v.ekf.model_error]
+    uncs = [FieldUncertainty(est.model.fe, me.representation_rms) for me in mode_errors]
     tf = np.asarray(ts["t_field"], float)
     shape = np.asarray(ts["field_hat"]).shape
     sigmas = [np.zeros(shape) for _ in variants]

@@ -168,9 +168,9 @@ class ClosedLoop:
         self.fillet = Fillet.of(cfg)
         self.tc_positions = np.asarray(furnace.tc_positions, float)
         self._phi_tc = first.model.fe.phi(self.tc_positions)
-        model_error = cfg.ekf.model_error
-        self.uncertainty = FieldUncertainty(first.model.fe,
-                                            0.0 if model_error is None else model_error.representation_rms)
+        model_error = cfg.ekf.model_error  # the specimen's mode at the start (the estimator's reported P as well)
+        self.uncertainty = FieldUncertainty(first.model.fe, 0.0 if model_error is None else
+                                            model_error.for_mode(scenario.oscillation.enabled).representation_rms)
         self._has_truth = furnace.true_field() is not None
         header = RunHeader(
             x=self.x, y=self.y, tc_positions=self.tc_positions, L_s=s.length, W_s=s.width,
