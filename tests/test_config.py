@@ -108,7 +108,9 @@ def test_banded_furnace_is_the_default_with_five_lamp_values_changed(cfg):
     changed = {k for k in a if a[k] != b[k]}
     assert changed == {"lamps.rated_power", "lamps.horizontal.heated_length", "lamps.horizontal.distance",
                        "lamps.vertical.heated_length", "lamps.vertical.distance",
-                       # (issue 26: banded is controlled as the default furnace, its [control] overrides nothing)
+                       # (issue 26: banded is controlled as the default furnace, and its MPC also weighs the
+                       # fillet's variance in the hold)
+                       "control.mpc_homogeneity",
                        # and its own measured model error for the reported covariance (issue 25)
                        "ekf.model_error.q0", "ekf.model_error.q1", "ekf.model_error.representation_rms",
                        # with its model's bias as consider states, and its oscillating specimen's own values

@@ -4,6 +4,7 @@ source timestamps through OpcUaFurnace, a late sample, a reconnection, a mapping
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
@@ -315,8 +316,12 @@ def test_a_stalled_twin_learns_what_the_furnace_did_meanwhile(emulated, tmp_path
     finally:
         twin.close()
     assert emu.emulator.interlock.trips == trips + 1
-    behind = [e for e in events if "fell behind" in e]
-    assert behind and "t = 1.0 s" in behind[0] and "lamp command went out" in behind[0], events
+    # the stall's event; a loaded machine may add true ones of its own before it (a CI run under the suite's
+    # load: "fell behind ... at t = 0.4 s: the sample was taken 0.07 s after it was due"), each well under the stall
+    behind = [e for e in events if "fell behind" in e and "t = 1.0 s" in e and "lamp command went out" in e]
+    assert len(behind) == 1, events
+    others = [e for e in events if "fell behind" in e and e not in behind]
+    assert all(float(re.search(r"(\d+\.\d+) s after", e).group(1)) < 0.5 for e in others), others
     late_s = float(behind[0].split("went out ")[1].split(" s")[0])
     assert 1.1 <= late_s <= 1.5, behind  # 1.3 s of stall, less what was left of the period
     assert any(e.startswith("the twin caught up with the furnace") for e in events), events
