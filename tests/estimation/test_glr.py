@@ -15,6 +15,7 @@ started every 3 samples and dropped after 10, and is checked after every sample 
 
 from __future__ import annotations
 
+import warnings
 from functools import cache
 
 import numpy as np
@@ -303,3 +304,37 @@ def test_candidate_of_a_table() -> None:
     c = one.candidate(0, 0, one.llr)
     assert (c.hypothesis, c.onset, c.age, c.size, c.sigma, c.llr, c.runner_up, c.runner_up_llr) == (
         0, 3, 1, 1.5, 0.5, 2.0, -1, 0.0)
+
+
+def test_without_an_increment_the_capacity_signature_is_only_propagated() -> None:
+    """``increment`` is optional: a sample without it adds b = 0 to the capacity hypothesis (its signature
+    is carried on by Phi), the same as a zero increment, not an unknown one."""
+    tables = []
+    for missing in (None, np.zeros(2)):
+        banks = SignatureBanks(2, 1, ("capacity", "offset"), (0, 0), onset_every=10, window=10, t_s=1.0)
+        C1, S1, L1, Phi = np.array([[1.0, 0.5]]), np.eye(1), np.array([[0.3], [0.1]]), np.array([[0.9, 0.1], [0, 0.8]])
+        for j, inc in enumerate((np.array([1.0, -0.5]), missing, np.array([0.2, 0.4]))):
+            banks.update(j, C1, np.array([0.7 - 0.2 * j]), S1, L1, np.array([True]))
+            banks.predict(Phi, np.zeros((2, 1)), np.zeros(1), inc)
+        banks.update(3, C1, np.array([0.1]), S1, L1, np.array([True]))
+        tables.append(banks.table())
+    np.testing.assert_array_equal(tables[0].llr, tables[1].llr)
+    np.testing.assert_array_equal(tables[0].size, tables[1].size)
+    assert tables[0].llr[0, 0] > 0.01  # the capacity hypothesis has a signature to compare
+
+
+def test_the_table_of_infinite_sums_is_nan_without_a_warning() -> None:
+    """A model that blew up (an infinite increment) makes the capacity sums infinite: the table reports
+    lambda NaN for it, the other hypotheses as before, and raises no RuntimeWarning at every sample (the
+    detector asks for the table at every sample)."""
+    banks = SignatureBanks(1, 1, ("capacity", "offset"), (0, 0), onset_every=10, window=10, t_s=1.0)
+    one = np.ones((1, 1))
+    with np.errstate(all="ignore"):
+        banks.update(0, one, np.array([0.5]), one, 0.5 * one, np.array([True]))
+        banks.predict(one, np.zeros((1, 1)), np.zeros(1), np.array([np.inf]))
+        banks.update(1, one, np.array([0.5]), one, 0.5 * one, np.array([True]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tab = banks.table()
+    assert np.isnan(tab.llr[0, 0])
+    assert tab.llr[0, 1] == pytest.approx((0.5 + 0.25) ** 2 / (1 + 0.25), rel=1e-12)
