@@ -178,8 +178,8 @@ Written by `bash scripts/mutation.sh MODULE...` (`scripts/mutation_modules.py`; 
 selected tests and the settings, and listed here with its date and hash; a module whose code or tests changed
 since is "not run" until it is run again.  Every mutant counts: raw score = (killed + timeout) / mutants; a
 mutant the run never reached is "not run" and counts as not detected.  A survivor is equivalent only when
-`scripts/mutation_equivalent.toml` names it with a reason and a second look (none so far); the issue-17
-regex rules are not applied.  The full report with every survivor's diff is an artifact
+`scripts/mutation_equivalent.toml` names it (a `[mutant."name"]` entry) with a reason and a second look;
+the issue-17 regex rules are not applied.  The full report with every survivor's diff is an artifact
 (`test-artifacts/mutation-report.md`), not committed.
 
 """

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from twin.control.ocp_grid import _fastest_rate, mean_time_constant
-from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
+from twin.control.plan import FeedforwardError, FeedforwardPlan, plain_status, saturation, simulate
 
 
 def _plan(t0: float = 10.0, n: int = 4) -> FeedforwardPlan:
@@ -85,6 +85,60 @@ def test_simulate_steps_the_model_from_the_initial_state() -> None:
 
 def test_saturation_clips_to_the_unit_interval() -> None:
     np.testing.assert_array_equal(saturation([-0.5, 0.0, 0.3, 1.0, 1.7]), [0.0, 0.0, 0.3, 1.0, 1.0])
+
+
+def test_saturation_gives_double_precision_fractions() -> None:
+    """u_ff = sat(v u_c) stays float64 when v or u_c come in single precision (no float32 plan)."""
+    got = saturation(np.array([-0.5, 0.3, 1.7], dtype=np.float32))
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got, [0.0, np.float32(0.3), 1.0])
+
+
+def test_simulate_hands_the_model_double_precision_inputs() -> None:
+    """The model's step gets float64 inputs (the DiscreteDynamics protocol), also for lists of ints or
+    float32 inputs: a compiled model need not convert them."""
+    seen = []
+
+    class _Recording(_Linear):
+        def step(self, theta, u):
+            seen.append(np.asarray(u).dtype)
+            return super().step(theta, u)
+
+    model = _Recording(np.array([[-1.0]]), np.array([[2.0]]))
+    np.testing.assert_allclose(simulate(model, [1], [[1], [2], [0]])[:, 0], [1.0, 1.5, 2.75, 1.375])
+    simulate(model, np.array([1.0]), np.array([[0.5]], dtype=np.float32))
+    assert seen == [np.float64] * 4
+
+
+def test_plain_status_words() -> None:
+    """IPOPT's statuses in words; another status with underscores in lower-case words; one without
+    underscores (the name of a plan's source) as it is."""
+    assert plain_status("Solve_Succeeded") == "solved"
+    assert plain_status("Infeasible_Problem_Detected") == "no plan meets the constraints, the closest one is used"
+    assert plain_status("User_Requested_Stop") == "user requested stop"
+    assert plain_status("Paper") == "Paper" and plain_status("by hand") == "by hand"
+
+
+def test_a_shifted_plan_starts_later_with_its_knots() -> None:
+    """shifted(dt): the sample times and the OCP's knot times move by dt, nothing else changes, and the
+    plan it was made from is left as it was."""
+    plan = _plan()
+    later = plan.shifted(2.5)
+    np.testing.assert_array_equal(later.t, plan.t + 2.5)
+    np.testing.assert_array_equal(later.warm["t_knots"], [12.5, 13.5, 14.5, 15.5])
+    np.testing.assert_array_equal(later.warm["v"], plan.warm["v"])
+    np.testing.assert_array_equal(later.u_ff, plan.u_ff)
+    np.testing.assert_array_equal(later.T_ref, plan.T_ref)
+    assert later.status == plan.status and set(later.warm) == {"t_knots", "v"}
+    np.testing.assert_array_equal(plan.t, 10.0 + 0.1 * np.arange(5))
+    np.testing.assert_array_equal(plan.warm["t_knots"], [10.0, 11.0, 12.0, 13.0])
+    np.testing.assert_array_equal(later.v_at([12.0, 14.4, 14.6]), [5.0, 6.0, 7.0])  # v moved with the knots
+    # knots kept as a list of whole seconds (e.g. read back from JSON) become float run times
+    listed = FeedforwardPlan(**{**plan.__dict__, "warm": {"t_knots": [10, 11], "v": [5.0]}}).shifted(3)
+    assert listed.warm["t_knots"].dtype == np.float64 and listed.warm["t_knots"].tolist() == [13.0, 14.0]
+    # a plan without knots (not parametrized) shifts its times only
+    plain = FeedforwardPlan(**{**plan.__dict__, "warm": {}}).shifted(1.0)
+    assert plain.warm == {} and plain.t[0] == 11.0
 
 
 def test_feedforward_error_keeps_the_solver_status() -> None:

@@ -240,3 +240,72 @@ def test_steady_state_that_does_not_converge_is_a_reference_error():
     # from a cold start far below the fixed point Newton's steps are capped at 500 K and still converge
     theta = steady_state(model, u, np.full(model.n, 300.0))
     assert np.max(np.abs(model.step(theta, u) - theta)) < 1e-6
+
+
+def test_rate_is_exactly_zero_from_the_end_of_the_transition_on():
+    """dT_ref/dt is 0 outside (t_start, t_end), also at t_end itself, where the spline's own slope carries
+    round-off (7e-15 K/s for this transition): a settled reference does not move at all."""
+    ref = reference_trajectory(TransitionReference(setpoint=1100.0, t_E=120.0), 300.0, t_start=7.3)
+    assert ref._spline.derivative()(ref.t_end) != 0.0  # the round-off the rate must not show
+    r = ref.rate(np.array([ref.t_end, ref.t_end + 1.0, 1e4]))
+    assert r.tolist() == [0.0, 0.0, 0.0]
+    assert ref.rate(np.array([ref.t_start + 60.0]))[0] == pytest.approx(1.5 * 800.0 / 120.0, rel=1e-12)
+
+
+def test_a_constant_reference_at_integer_times_is_float():
+    """A one-point reference is constant: at integer run times it is its temperature as a float (not
+    truncated to an integer), its rate float zeros."""
+    ref = reference_trajectory(PointsReference(points=[(0.0, 1100.5)]), 300.0)
+    got = ref(np.array([0, 10, 100]))
+    assert got.dtype == np.float64 and got.tolist() == [1100.5] * 3
+    rate = ref.rate(np.array([0, 10]))
+    assert rate.dtype == np.float64 and rate.tolist() == [0.0, 0.0]
+
+
+class _Linear1:
+    """theta+ = theta + 0.5 (b - theta), b = 1000 + 100 u: one node, fixed point b, Newton's step b - theta."""
+
+    n, m = 1, 1
+    c_m = np.ones(1)
+
+    def step(self, theta, u):
+        return theta + 0.5 * (1000.0 + 100.0 * u[0] - theta)
+
+    def jac_theta(self, theta, u):
+        return np.full((1, 1), 0.5)
+
+
+def test_newton_steps_of_the_steady_state_are_capped_at_500_K():
+    """From 1502 K below the fixed point the steps are 500, 500, 500, 2 K and a last check: 5 iterations
+    (4 fail); an uncapped or a 501 K cap would need fewer.  The default limit is 50 iterations: 24,502 K
+    below (49 capped steps, a 2 K one and the check: 51) is too far, 24,002 K (50) is not."""
+    model, u = _Linear1(), np.array([0.0])
+    with pytest.raises(ReferenceError, match="in 4 iterations"):
+        steady_state(model, u, np.array([1000.0 - 1502.0]), max_iter=4)
+    assert steady_state(model, u, np.array([1000.0 - 1502.0]), max_iter=5)[0] == pytest.approx(1000.0, abs=1e-9)
+    with pytest.raises(ReferenceError, match="in 50 iterations"):
+        steady_state(model, u, np.array([1000.0 - 24502.0]))
+    assert steady_state(model, u, np.array([1000.0 - 24002.0]))[0] == pytest.approx(1000.0, abs=1e-9)
+
+
+def test_steady_state_of_a_model_whose_jacobian_depends_on_u():
+    """theta+ = theta + 0.1 (1000 u - (1 + u) theta): fixed point 1000 u / (1 + u); dF/dtheta = 1 - 0.1 (1 + u)
+    needs the same u as F (a model need not be input-affine).  The model gets u as float64 also when it
+    is given as a list of ints."""
+    seen = []
+
+    class _Bilinear:
+        n, m = 1, 1
+        c_m = np.ones(1)
+
+        def step(self, theta, u):
+            seen.append(np.asarray(u).dtype)
+            return theta + 0.1 * (1000.0 * u[0] - (1.0 + u[0]) * theta)
+
+        def jac_theta(self, theta, u):
+            seen.append(np.asarray(u).dtype)
+            return np.full((1, 1), 1.0 - 0.1 * (1.0 + u[0]))
+
+    theta = steady_state(_Bilinear(), [3], np.array([300.0]))
+    assert theta[0] == pytest.approx(750.0, rel=1e-12)
+    assert seen and all(dt == np.float64 for dt in seen)

@@ -100,3 +100,12 @@ def test_eta_function():
     assert eta_function(OscillationSpec(enabled=False))(3.0) == 0.0
     # a later start t0 begins at eta = 0
     assert eta_function(spec, t0=5.0)(5.0) == 0.0
+
+
+def test_positions_are_a_float_array_also_for_integer_input():
+    """``positions`` (the Furnace protocol's tc_positions) is the (n, 2) float64 array in m whatever sequence
+    was given: integer coordinates (a corner at (0, 0)) stay floats for the run files and the views."""
+    cfg = small_config()
+    tcs = Thermocouples(cfg, [(0, 0), [0, 0]])
+    assert tcs.positions.dtype == np.float64 and tcs.positions.shape == (2, 2)
+    assert tcs.positions.tolist() == [[0.0, 0.0], [0.0, 0.0]]

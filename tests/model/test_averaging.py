@@ -153,3 +153,49 @@ def test_amplitude_up_to_the_table_end_is_accepted() -> None:
         oscillation_weights(nodes, 0.0401)
     # a negative amplitude is no oscillation: the fixed specimen's weights
     np.testing.assert_array_equal(oscillation_weights(nodes, -0.01), hat_weights(nodes, 0.0))
+
+
+def test_the_table_tolerance_is_relative_above_a_span_of_one_and_exact_at_its_edges() -> None:
+    """tol = TABLE_TOLERANCE max(1, span): absolute (1e-9) for tables in m, relative for a table in mm
+    (span 100: 1e-7); a position exactly at an end +- tol is still inside, 1.5 tol beyond is outside."""
+    from twin.physics.motion import TABLE_TOLERANCE, hat_interval
+
+    mm = [-50.0, -25.0, 0.0, 25.0, 50.0]
+    assert hat_interval(mm, 50.0 + 0.5e-7) == (3, 1.0) and hat_interval(mm, -50.0 - 0.5e-7) == (0, 0.0)
+    with pytest.raises(ValueError, match="outside"):
+        hat_interval(mm, 50.0 + 3e-7)
+    m = [-0.05, 0.0, 0.05]
+    tol = TABLE_TOLERANCE * 1.0
+    assert hat_interval(m, -0.05 - tol) == (0, 0.0) and hat_interval(m, 0.05 + tol) == (1, 1.0)
+    for eta in (0.05 + 1.5 * tol, -0.05 - 1.5 * tol):
+        with pytest.raises(ValueError, match="outside"):
+            hat_interval(m, eta)
+
+
+def test_a_single_precision_table_gives_the_weights_of_its_values() -> None:
+    """Table positions stored as float32 are taken at their values: the moments are formed in double
+    precision (in float32 the weights would be off by ~1e-7)."""
+    nodes32 = NODES.astype(np.float32)
+    exact = oscillation_weights(nodes32.astype(float), 0.048)
+    np.testing.assert_array_equal(oscillation_weights(nodes32, 0.048), exact)
+
+
+def test_the_amplitude_check_holds_for_two_nodes_and_at_its_tolerance() -> None:
+    """A two-node table refuses an amplitude beyond it too; an amplitude up to 1e-12 m beyond the shorter
+    side is accepted (round-off; the arcsine mass beyond the table, ~2e-6, is then left out), 3e-12 m is not."""
+    with pytest.raises(ValueError, match="exceeds"):
+        oscillation_weights(np.array([-0.02, 0.02]), 0.03)
+    nodes = np.linspace(-0.05, 0.05, 5)
+    assert oscillation_weights(nodes, 0.05 + 1e-12).sum() == pytest.approx(1.0, abs=1e-5)
+    with pytest.raises(ValueError, match="exceeds"):
+        oscillation_weights(nodes, 0.05 + 3e-12)
+
+
+def test_a_motion_of_any_non_zero_amplitude_moves() -> None:
+    """Only a disabled spec or a zero amplitude holds the specimen: 1 m (a furnace with a long travel, its
+    limits checked elsewhere) is a sine like any other amplitude."""
+    from twin.physics.motion import eta_function
+
+    spec = OscillationSpec.model_construct(enabled=True, amplitude=1.0, period=4.0)
+    assert eta_function(spec)(1.0) == pytest.approx(1.0, rel=1e-12)
+    assert eta_function(spec)(3.0) == pytest.approx(-1.0, rel=1e-12)

@@ -132,3 +132,37 @@ def test_batches_of_flat_fields() -> None:
     np.testing.assert_allclose(fillet.mean(T), [_oracle_mean(cfg, row) for row in T], rtol=1e-13)
     np.testing.assert_allclose(fillet.sup(T, np.array([600.0, 700.0, 800.0])),
                                [fillet.sup(row, ref) for row, ref in zip(T, (600.0, 700.0, 800.0), strict=True)])
+
+
+def test_the_fillet_does_not_depend_on_the_unit_of_length() -> None:
+    """Weights and mask depend on x / L_s and y / W_s only: the 26 x 17 grid, whose centres 6 and 19 lie on
+    the fillet's edges 0.25 / 0.75 L_s, gives the same fillet in um, mm, m and km (the edge tolerance scales
+    with the specimen; a fixed or inverted one takes in every cell or misses the edge cells)."""
+    ref = _fillet(26, 17, 0.52, 0.34)
+    assert int(ref.mask.sum()) == 154  # the edge cells are in
+    for scale in (1e-6, 1e-3, 1e3, 1e6):
+        f = _fillet(26, 17, 0.52 * scale, 0.34 * scale)
+        np.testing.assert_array_equal(f.mask, ref.mask, err_msg=f"scale {scale}")
+        np.testing.assert_allclose(f.weights, ref.weights, rtol=1e-12, atol=1e-15, err_msg=f"scale {scale}")
+
+
+def test_centres_in_single_precision_are_taken_at_their_values() -> None:
+    """Cell centres given as float32 give the fillet of their (exact) double values: the overlaps are
+    computed in double precision (in float32 the weights would be rounded to ~1e-7)."""
+    x = ((np.arange(26) + 0.5) * 0.52 / 26).astype(np.float32)
+    y = ((np.arange(17) + 0.5) * 0.34 / 17).astype(np.float32)
+    single, double = Fillet.on_grid(x, y, 0.52, 0.34), Fillet.on_grid(x.astype(float), y.astype(float), 0.52, 0.34)
+    np.testing.assert_array_equal(single.weights, double.weights)
+    np.testing.assert_array_equal(single.mask, double.mask)
+
+
+def test_the_closed_fillet_takes_centres_up_to_its_tolerance_and_no_further() -> None:
+    """T_sup's cells: centres in the closed fillet, its edges widened by 1e-12 L_s (W_s) against round-off.
+    A centre exactly at an edge +- that tolerance is in, one at three times the tolerance is out."""
+    L, W = 0.52, 0.34
+    ex, ey = 1e-12 * L, 1e-12 * W
+    x = np.array([0.25 * L - ex, 0.25 * L - 3 * ex, 0.5 * L, 0.75 * L + 3 * ex, 0.75 * L + ex])
+    y = np.array([0.2 * W - ey, 0.2 * W - 3 * ey, 0.5 * W, 0.8 * W + 3 * ey, 0.8 * W + ey])
+    mask = Fillet.on_grid(x, y, L, W).mask
+    inside = np.array([True, False, True, False, True])
+    np.testing.assert_array_equal(mask, np.outer(inside, inside))
