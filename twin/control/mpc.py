@@ -238,8 +238,8 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     x_free = np.append(d_free, I_free)
     Hess += G_full.T @ PT @ G_full
     grad += G_full.T @ (PT @ x_free)
-    holding = plan.T_ref[min(end, N)] == plan.T_ref[min(j, N)]  # the reference holds still over the horizon
-    if W is not None and s.homogeneity > 0.0 and holding:  # (q_W / 2) theta_H^T W theta_H, theta_H = theta_ref,H + d_H
+    # (q_W / 2) theta_H^T W theta_H, theta_H = theta_ref,H + d_H, while the reference holds still over the horizon
+    if W is not None and s.homogeneity > 0.0 and plan.T_ref[min(end, N)] == plan.T_ref[min(j, N)]:
         WGd = W @ Gd
         Hess += s.homogeneity * (Gd.T @ WGd)
         grad += s.homogeneity * (WGd.T @ (d_free + plan.theta_ref[min(end, N)]))
