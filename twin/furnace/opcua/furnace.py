@@ -125,6 +125,7 @@ class OpcUaFurnace:
         self._lamps_driven = False  # the twin has enabled the lamps with its watchdog
         self._lamps_off_at: float | None = None  # run time at which the furnace switched them off
         self._behind = 0  # samples in the current run of samples the twin answered late
+        self._behind_worst = (0.0, 0.0)  # the current run's longest lateness (s) and the sample's time (s)
         self.overdue_samples = 0  # samples answered late (taken after their deadline, or command after the next)
         try:
             self._io.call(self._link.open(), timeout=4 * options.connect_timeout_s)
@@ -214,19 +215,26 @@ class OpcUaFurnace:
     def _note_behind(self, j: int, taken_late: float, sent_late: float) -> None:
         """Sample j was taken after its deadline, or its command sent after the next sample was due: the furnace
         held an older command meanwhile (its watchdog may have switched the lamps off).  An event when a run of
-        such samples starts, and when the twin has caught up."""
+        such samples starts, and when the twin has caught up; the latter names the run's longest lateness, which
+        need not be its first (a loaded machine's 0.1 s, then a 1.3 s pause)."""
         t = j * self.t_s
-        if taken_late > 0.0 or sent_late > 0.0:
+        late = max(taken_late, sent_late)
+        if late > 0.0:
             self.overdue_samples += 1
             self._behind += 1
             if self._behind == 1:
+                self._behind_worst = (late, t)
                 what = (f"the sample was taken {taken_late:.2f} s after it was due" if taken_late > 0.0 else
                         f"its lamp command went out {sent_late:.2f} s after the next sample was due")
                 self._events.append(f"the twin fell behind the furnace at t = {t:.1f} s: {what} (the furnace held "
                                     "an older command meanwhile)")
+            elif late > self._behind_worst[0]:
+                self._behind_worst = (late, t)
         elif self._behind:
+            worst, t_worst = self._behind_worst
             self._events.append(f"the twin caught up with the furnace at t = {t:.1f} s after {self._behind} "
-                                f"samples late ({self.overdue_samples} in this run)")
+                                f"sample{'s' if self._behind > 1 else ''} late, the longest {worst:.2f} s at t = {t_worst:.1f} s "
+                                f"({self.overdue_samples} in this run)")
             self._behind = 0
 
     def _reading(self, channel: int, value: float, good: bool, source_s: float, arrival: float) -> None:
