@@ -232,9 +232,9 @@ class OpcUaFurnace:
                 self._behind_worst = (late, t)
         elif self._behind:
             worst, t_worst = self._behind_worst
-            self._events.append(f"the twin caught up with the furnace at t = {t:.1f} s after {self._behind} "
-                                f"sample{'s' if self._behind > 1 else ''} late, the longest {worst:.2f} s at t = {t_worst:.1f} s "
-                                f"({self.overdue_samples} in this run)")
+            samples = f"{self._behind} sample{'s' if self._behind > 1 else ''}"
+            self._events.append(f"the twin caught up with the furnace at t = {t:.1f} s after {samples} late, the "
+                                f"longest {worst:.2f} s at t = {t_worst:.1f} s ({self.overdue_samples} in this run)")
             self._behind = 0
 
     def _reading(self, channel: int, value: float, good: bool, source_s: float, arrival: float) -> None:
