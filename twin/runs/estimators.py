@@ -53,6 +53,7 @@ class RunEstimators:
         self.shadow: JointEstimator | None = None if spec.shadow is None else build_estimator(
             spec.shadow, tables, oscillation, cfg, theta0)
         self._follows = cfg.calibration.controller_follows
+        self._learns = cfg.control.plan_learns  # the learnt parameters a plan may take
         self._threshold = cfg.calibration.replan_threshold
         self._interval = cfg.calibration.replan_interval
         self._last_t = -np.inf
@@ -76,18 +77,31 @@ class RunEstimators:
             if est is not None:
                 est.set_model(est.model.with_oscillation(oscillation))
 
+    def for_plan(self, base: Parameters) -> Parameters:
+        """The parameters a re-plan's model takes: of ``[control] plan_learns``, those the primary estimator
+        knows well (sigma below ``calibration.replan_threshold``); the others as in ``base`` (the run's first
+        plan: the calibration memory's, or nominal).  Not the estimator's emissivity, by default: it is an
+        effective value fitted to TC1-3, and a plan made with it measured worse (``docs/control.md``)."""
+        values = {name: getattr(base, name) for name in PARAMETERS}
+        for name, v in self.primary.calibration().items():
+            if name in self._learns and v["sigma"] < self._threshold:
+                values[name] = v["value"]
+        return Parameters(**values)
+
     def calibration_due(self, t: float, planned: Parameters, holding: bool = True) -> str | None:
         """A description of the calibration if the controller's model (built with ``planned``) should be
-        re-planned now (module docstring; ``holding``: the reference holds still at ``t``), else None."""
+        re-planned now (module docstring; ``holding``: the reference holds still at ``t``), else None: a
+        parameter a plan takes (``[control] plan_learns``) is known well and has moved since."""
         est = self.primary
         if not est.k or not self._follows or not holding or t < self._last_t + self._interval:
             return None
         cal = est.calibration()
         if not any(v["sigma"] < self._threshold and abs(v["value"] - getattr(planned, name)) > self._threshold
-                   for name, v in cal.items()):
+                   for name, v in cal.items() if name in self._learns):
             return None
         self._last_t = t
-        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})" for k, v in cal.items())
+        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})" for k, v in cal.items()
+                        if k in self._learns)
         return f"calibration at t = {t:.1f} s: {now}"
 
     def outputs(self, shadow: Array | None, phi_tc: Array, fe: Any) -> dict[str, Any]:

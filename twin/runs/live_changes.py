@@ -60,7 +60,7 @@ class PlanHost(Protocol):
         ...
 
     def estimate(self) -> tuple[Array, Parameters]:
-        """The primary estimator's state theta (a copy) and calibrated parameters: where a re-plan starts."""
+        """The primary estimator's state theta (a copy) and the parameters a re-plan takes: where it starts."""
         ...
 
     def note(self, text: str) -> None:
@@ -112,6 +112,7 @@ class LiveChanges:
                scenario.control.model_dump_json())
         learnt = scenario.control.plan_parameters  # what earlier runs of this furnace learnt (calibration memory)
         first = Parameters() if learnt is None else Parameters(**learnt.model_dump())
+        self.first_parameters = first  #: the first plan's parameters: what a re-plan keeps of what it does not learn
         if plan_cache is not None and key in plan_cache:
             self.current = plan_cache[key]
         else:

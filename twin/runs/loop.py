@@ -368,8 +368,9 @@ class ClosedLoop:
         return self.j * self.t_s
 
     def estimate(self) -> tuple[np.ndarray, Parameters]:
-        """The primary estimator's theta (a copy) and calibrated parameters."""
-        return self.estimator.state.theta.copy(), self.estimator.parameters
+        """The primary estimator's theta (a copy) and the parameters a re-plan takes (the learnt ones a plan may
+        use, :meth:`twin.runs.estimators.RunEstimators.for_plan`)."""
+        return self.estimator.state.theta.copy(), self.estimators.for_plan(self.changes.first_parameters)
 
     def note(self, text: str) -> None:
         """An event of the current sample (it goes out with the next snapshot)."""
