@@ -50,3 +50,54 @@ def test_threshold_on_sigma_and_move(small_radiation, value, sigma, planned, due
     run = _run(small_radiation, follows=True, value=value, sigma=sigma)
     got = run.calibration_due(200.0, Parameters(lamp_efficiency=planned), holding=True)
     assert (got is not None) is due
+
+
+def _known(small_radiation, lamp: tuple[float, float], emissivity: tuple[float, float]) -> RunEstimators:
+    run = _run(small_radiation, follows=True, value=0.0, sigma=1.0)
+    run.primary.calibration = lambda: {"lamp_efficiency": {"value": lamp[0], "sigma": lamp[1]},  # type: ignore[method-assign]
+                                       "emissivity": {"value": emissivity[0], "sigma": emissivity[1]}}
+    return run
+
+
+def test_a_replan_takes_only_what_a_plan_may_learn(small_radiation) -> None:
+    """[control] plan_learns = ["lamp_efficiency"] (the default): a re-plan's model takes the estimator's lamp
+    efficiency once it is known to better than the threshold, never its effective emissivity (docs/control.md:
+    planned with it, the true steady T_sup rose from 1.67 % to 1.85 %); what it does not take stays as the
+    run's first plan had it (the calibration memory's)."""
+    assert CFG.control.plan_learns == ("lamp_efficiency",)
+    base = Parameters(lamp_efficiency=-0.05, emissivity=-0.02)
+    known = _known(small_radiation, lamp=(-0.12, 0.005), emissivity=(-0.25, 0.005))
+    assert known.for_plan(base) == Parameters(lamp_efficiency=-0.12, emissivity=-0.02)
+    vague = _known(small_radiation, lamp=(-0.12, 0.05), emissivity=(-0.25, 0.005))  # heat-up: still the prior's
+    assert vague.for_plan(base) == base
+    # the emissivity moving alone asks for no re-plan: the plan would not change
+    still = _known(small_radiation, lamp=(-0.05, 0.005), emissivity=(-0.25, 0.005))
+    assert still.calibration_due(200.0, base, holding=True) is None
+    said = known.calibration_due(200.0, base, holding=True)
+    assert said is not None and "lamp_efficiency -12.0 %" in said and "emissivity" not in said
+
+
+def test_plan_learns_widens_what_a_replan_takes(small_radiation) -> None:
+    cfg = CFG.with_overrides({"calibration.controller_follows": True,
+                              "control.plan_learns": ["lamp_efficiency", "emissivity"]})
+    run = RunEstimators(EstimatorSpec(motion="position_aware", calibrate=True), model_tables(cfg, small_radiation),
+                        None, cfg, 300.0)
+    run.primary.calibration = lambda: {"lamp_efficiency": {"value": -0.12, "sigma": 0.005},  # type: ignore[method-assign]
+                                       "emissivity": {"value": -0.25, "sigma": 0.005}}
+    assert run.for_plan(Parameters()) == Parameters(lamp_efficiency=-0.12, emissivity=-0.25)
+
+
+def test_the_loop_replans_with_what_a_plan_may_learn(small_radiation) -> None:
+    """The loop hands a re-plan (a reference change, a switch, a calibration) the estimator's known lamp
+    efficiency and the first plan's emissivity (the calibration memory's, here -2 %), not the estimator's."""
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    scenario = Scenario.model_validate({"duration": 4.0, "reference": {"setpoint": 400.0, "t_E": 2.0}, "seed": 31,
+                                        "control": {"plan_parameters": {"emissivity": -0.02}}})
+    loop = ClosedLoop(CFG, scenario, small_radiation)
+    assert loop.changes.current.parameters == Parameters(emissivity=-0.02)  # the first plan: the memory's
+    loop.estimator.calibration = lambda: {"lamp_efficiency": {"value": -0.12, "sigma": 0.005},  # type: ignore[method-assign]
+                                          "emissivity": {"value": -0.25, "sigma": 0.005}}
+    _, parameters = loop.estimate()
+    assert parameters == Parameters(lamp_efficiency=-0.12, emissivity=-0.02)
