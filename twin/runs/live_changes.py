@@ -71,7 +71,8 @@ class PlanHost(Protocol):
         """A new reference or oscillation (``kind``) in force from run time ``t``."""
         ...
 
-    def adopt(self, plan: Plan, *, motion_changed: bool, fresh_integrator: bool) -> None:
+    def adopt(self, plan: Plan, *, motion_changed: bool, fresh_integrator: bool,
+              carry_integrator: bool = False) -> None:
         """Run the controller (and, when the motion changed, the estimators and the detector) on ``plan``."""
         ...
 
@@ -253,8 +254,10 @@ class LiveChanges:
                     "oscillation": f"oscillation {'on' if spec.enabled else 'off'} at t = {t:.1f} s{how}",
                     "calibration": f"calibration at t = {t:.1f} s",
                     "lamps": f"{self._lamps_change} from t = {t:.1f} s"}
-            # a plan that models a lamp group's lost power: the integrator, which made up for it, starts at 0
-            self._install(ctl, "; ".join(said.get(k, k) for k in kinds), fresh_integrator="lamps" in kinds)
+            # a plan that models a lamp group's lost power: the integrator, which made up for it, starts at 0; a
+            # calibration alone keeps the goal: the integrator gives up what the new feedforward carries
+            self._install(ctl, "; ".join(said.get(k, k) for k in kinds), fresh_integrator="lamps" in kinds,
+                          carry_integrator=set(kinds) == {"calibration"})
             return t
 
         def fail(exc: BaseException, kinds: list[str]) -> None:  # back to what is in force
@@ -266,11 +269,14 @@ class LiveChanges:
             raise future.exception()  # type: ignore[misc]
         return future
 
-    def _install(self, ctl: Plan, description: str, fresh_integrator: bool = False) -> None:
+    def _install(self, ctl: Plan, description: str, fresh_integrator: bool = False,
+                 carry_integrator: bool = False) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
-        models what the integrator was making up for (a lamp group's lost power): then it starts at 0."""
+        models what the integrator was making up for: a lamp group's lost power (it starts at 0), or the
+        calibrated lamps (it gives up what the new feedforward carries)."""
         motion_changed = ctl.oscillation != self.current.oscillation
         self.current = ctl
-        self._host.adopt(ctl, motion_changed=motion_changed, fresh_integrator=fresh_integrator)
+        self._host.adopt(ctl, motion_changed=motion_changed, fresh_integrator=fresh_integrator,
+                         carry_integrator=carry_integrator)
         self._host.note(f"re-planned ({description}): {plain_status(ctl.plan.status)}"
                         + (f"; {ctl.note}" if ctl.note else ""))

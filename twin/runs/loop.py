@@ -382,15 +382,24 @@ class ClosedLoop:
             self.furnace.set_oscillation(spec, t)
         self.record.note_change(t, kind, spec.model_dump_json())
 
-    def adopt(self, plan: Plan, *, motion_changed: bool, fresh_integrator: bool) -> None:
+    def adopt(self, plan: Plan, *, motion_changed: bool, fresh_integrator: bool,
+              carry_integrator: bool = False) -> None:
         """The controller on ``plan``; the integrator state carries over unless ``fresh_integrator`` (a plan that
-        models what it was making up for: a lamp group's lost power); a new motion switches the averaged estimators
-        and the detector to its period average with the controller."""
-        self.controller = self.controller.with_plan(plan.plan, plan.gains, plan.model)
+        models what it was making up for: a lamp group's lost power) or ``carry_integrator`` (a plan of the same
+        goal on a calibrated model: what the new feedforward carries comes off the integrator,
+        :func:`twin.control.lqg.carried_integrator`); a new motion switches the averaged estimators and the
+        detector to its period average with the controller."""
+        old = self.controller
+        self.controller = old.with_plan(plan.plan, plan.gains, plan.model)
         if fresh_integrator:
             from twin.control.lqg import IntegratorState
 
             self.controller.state = IntegratorState()
+        elif carry_integrator:
+            from twin.control.lqg import carried_integrator
+
+            self.controller.state = carried_integrator(old.plan, old.gains, plan.plan, plan.gains, self.sample_time(),
+                                                       self.estimator.state.theta, old.state)
         if motion_changed:
             self.estimators.switch_motion(plan.oscillation if plan.oscillation.enabled else None)
             self.position_ff = self._position_feedforward(plan.oscillation)
