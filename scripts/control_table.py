@@ -10,7 +10,8 @@ Each run: the paper's reference (1100 K in t_E = 120 s, 240 s), fixed specimen, 
 furnace's own truth (``truth = "independent"``), one seed; the errors are recomputed from the true field of every
 sample (``Snapshot.true_mean``), not from the twin's estimate.  Variants:
 
-* ``paper``: the paper's controller (LQG, constant c_p in the plan, no reserve), what the twin did before issue 26;
+* ``paper``: the paper's controller (LQG, constant c_p in the plan, no reserve, no re-plan on the calibration), what
+  the twin did before issue 26;
 * ``twin``: the furnace file's ``[control]`` settings (the twin's defaults);
 * ``lqg`` / ``mpc``: the furnace file's settings with that feedback.
 
@@ -35,7 +36,7 @@ import numpy as np
 SETPOINT, T_E, DURATION = 1100.0, 120.0, 240.0
 VARIANTS = {
     "paper": {"control.feedback": "lqg", "control.plan_heat_capacity": "constant", "control.feedforward_limit": 1.0,
-              "control.position_feedforward": False},
+              "control.position_feedforward": False, "calibration.controller_follows": False},
     "twin": {},
     "lqg": {"control.feedback": "lqg"},
     "mpc": {"control.feedback": "mpc"},

@@ -111,6 +111,8 @@ def test_banded_furnace_is_the_default_with_five_lamp_values_changed(cfg):
                        # (issue 26: banded is controlled as the default furnace, and its MPC also weighs the
                        # fillet's variance in the hold)
                        "control.mpc_homogeneity",
+                       # (its fixed specimen's steady mean error measured worse with a calibration's re-plan)
+                       "calibration.controller_follows",
                        # and its own measured model error for the reported covariance (issue 25)
                        "ekf.model_error.q0", "ekf.model_error.q1", "ekf.model_error.representation_rms",
                        # with its model's bias as consider states, and its oscillating specimen's own values
