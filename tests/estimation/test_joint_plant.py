@@ -11,6 +11,8 @@ the calibration priors and random walks on seed 21 (small furnace, 240-600 s run
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -103,17 +105,27 @@ def test_calibration_learns_weaker_lamps(weaker_lamps) -> None:
 @pytest.mark.slow
 def test_controller_follows_the_calibration(weaker_lamps) -> None:
     """The controller's model is re-planned with the calibrated lamps (events), and its feedforward then
-    carries the power the weaker lamps need: the feedback's share of the power falls to about nothing.
+    carries the power the weaker lamps need: the feedback's share of the power falls to what the plan does not
+    know, (1 + eta_planned) / (1 + eta_true) - 1 with eta_true = -0.1 (the plant's mismatch), because the
+    integrator gives up what the new feedforward carries (twin.control.lqg.carried_integrator).
 
-    Measured on seed 41 (two re-plans, at 113.5 s and 158.7 s): sum(u) / sum(u_ff) = 1.161 over 60-120 s
-    (the nominal plan, the feedback makes up the 10 % weaker lamps), 1.011 over 180-240 s; the same run with
-    ``calibration.controller_follows = false`` stays at 1.106 over 180-240 s."""
+    Measured on seed 41 (re-plans at 113.5 s with -5.3 % and 156.5 s with -7.3 %; the value then moves to -9 %,
+    within the 2 % threshold): sum(u) / sum(u_ff) - 1 = 0.198 over 60-100 s (the nominal plan), 0.030 over
+    180-240 s against the plan's gap 0.927 / 0.9 - 1 = 0.030.  At the first re-plan the total power does not jump
+    (2.292 -> 2.292) and the estimated mean is 0.08 K off 10 s later; with the integrator kept whole (planted) it
+    jumped to 2.378 (the integrator made up the lamps a second time) and the mean was 1.62 K above 10 s later.
+    (Over 180-240 s both end near the gap: the LQG's integrator unwinds within a minute here.)"""
     for ts in weaker_lamps.values():
         replans = [e for e in ts["event_text"] if e.startswith("calibration at")]
         assert 1 <= len(replans) <= 240.0 / small_config().calibration.replan_interval + 1
         assert any("lamp_efficiency -" in e for e in replans)
         t, u, u_ff = ts["t"], ts["u"], ts["u_ff"]
-        before, after = (t >= 60.0) & (t < 100.0), t >= 180.0  # hold at the setpoint: nominal, then followed
+        t_last = float(re.search(r"at t = ([\d.]+) s", replans[-1]).group(1))
+        planned = float(re.search(r"lamp_efficiency ([-+\d.]+) %", replans[-1]).group(1)) / 100.0
+        before, after = (t >= 60.0) & (t < 100.0), t >= max(180.0, t_last + 20.0)  # nominal, then followed
         share = {k: u[m].sum() / u_ff[m].sum() - 1.0 for k, m in (("before", before), ("after", after))}
         assert share["before"] > 0.06, share  # the nominal plan misses the weaker lamps' power
-        assert abs(share["after"]) < 0.03, share  # the re-planned feedforward carries it
+        gap = (1.0 + planned) / (1.0 - 0.1) - 1.0  # the part of the lamps' deficit the plan does not know
+        assert share["after"] == pytest.approx(gap, abs=0.008), (share, gap)
+        j = int(round(float(re.search(r"at t = ([\d.]+) s", replans[0]).group(1)) / CFG.sampling.t_s))
+        assert abs(u[j].sum() - u[j - 1].sum()) < 0.03, (u[j - 1].sum(), u[j].sum())  # bumpless
