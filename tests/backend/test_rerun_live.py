@@ -74,11 +74,16 @@ def test_a_run_streams_live_to_a_rerun_receiver(tmp_path, small_cfg, receiver) -
             break
         assert time.monotonic() < end, f"the receiver never had every entity: {got.stdout if got else 'no file'}"
         time.sleep(0.5)
-    proc.send_signal(signal.SIGINT)
-    proc.wait(timeout=30)
     printed = subprocess.run([rerun_binary(), "rrd", "print", str(out)], capture_output=True, text=True, env=env,
                              timeout=120)
     assert f'"{run_id}"' in printed.stdout  # the recording's id is the run's
+    # the receiver is a third party's: how fast it shuts down is its own business (under the suite's load a CI run
+    # saw it take over 30 s after SIGINT, with every entity already in its file); the fixture kills it if it lingers
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        pass
     written = _stats(own, env)
     assert written.returncode == 0
     for entity in ENTITIES:
