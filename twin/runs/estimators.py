@@ -92,7 +92,8 @@ class RunEstimators:
     def calibration_due(self, t: float, planned: Parameters, holding: bool = True) -> str | None:
         """A description of the calibration if the controller's model (built with ``planned``) should be
         re-planned now (module docstring; ``holding``: the reference holds still at ``t``), else None: a
-        parameter a plan takes (``[control] plan_learns``) is known well and has moved since."""
+        parameter a plan takes (``[control] plan_learns``) is known well, for the first time in this run or
+        moved by more than the threshold since ``planned``."""
         est = self.primary
         if not est.k or not self._follows or not holding or t < self._last_t + self._interval:
             return None
