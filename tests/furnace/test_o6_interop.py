@@ -124,13 +124,19 @@ def _event_times(npz) -> list[tuple[float, str]]:
 
 #: the furnace's server is killed at this run time; before it, nothing the test does disturbs the run
 KILL_AT = 10.0
+#: run time (s) at which the test freezes the restarted furnace for 2 s
+FREEZE_AT = 24.0
 
 
 def _timing_disturbed_before_the_outages(events: list[tuple[float, str]]) -> list[str]:
-    """What says the machine, not the test, disturbed the real-time run before the first outage: late samples
-    or a TC dropout before :data:`KILL_AT` (on a quiet machine there are none; in CI with a busy neighbour on the
-    other core the o6 furnace's first readings came a second late and its restart's readings 2.6 s late)."""
-    return [e for t, e in events if t < KILL_AT and ("late" in e or "dropout" in e)]
+    """What says the machine, not the test, disturbed the real-time run: late samples or a TC dropout before
+    :data:`KILL_AT` (on a quiet machine there are none; in CI with a busy neighbour on the other core the o6
+    furnace's first readings came a second late and its restart's readings 2.6 s late), or a second loss of the
+    link before the freeze, which the test does not cause (in a full suite under load the restarted furnace did
+    not answer a request in 10 s; meanwhile TC3 and TC4, whose subscription was not yet made again, counted as
+    dropouts)."""
+    lost = [e for t, e in events if t < FREEZE_AT and e.startswith("link to the furnace lost")]
+    return [e for t, e in events if t < KILL_AT and ("late" in e or "dropout" in e)] + lost[1:]
 
 
 def _drive_through_restart(tmp_path: Path) -> tuple[dict, list[tuple[float, str]], dict, dict, dict, Any, str]:
@@ -166,7 +172,7 @@ def _drive_through_restart(tmp_path: Path) -> tuple[dict, list[tuple[float, str]
         furnace.wait(10)
         time.sleep(2.0)
         with o6_furnace(port, state, spare=2) as (furnace2, second):  # back, its namespace at another index
-            at(24.0)
+            at(FREEZE_AT)
             furnace2.send_signal(signal.SIGSTOP)  # then frozen 2 s: the link stays up, no readings come
             time.sleep(2.0)
             furnace2.send_signal(signal.SIGCONT)
