@@ -84,10 +84,14 @@ class RunEstimators:
         plan: the calibration memory's, or nominal).  Not the estimator's emissivity, by default: it is an
         effective value fitted to TC1-3, and a plan made with it measured worse (``docs/control.md``)."""
         values = {name: getattr(base, name) for name in PARAMETERS}
-        for name, v in self.primary.calibration().items():
-            if name in self._learns and v["sigma"] < self._threshold:
-                values[name] = v["value"]
+        values.update({name: v["value"] for name, v in self._known().items()})
         return Parameters(**values)
+
+    def _known(self) -> dict[str, dict[str, float]]:
+        """The primary's calibrated parameters a plan may take (``[control] plan_learns``) that it knows to better
+        than ``calibration.replan_threshold`` (sigma): ``{name: {"value", "sigma"}}``."""
+        return {name: v for name, v in self.primary.calibration().items()
+                if name in self._learns and v["sigma"] < self._threshold}
 
     def calibration_due(self, t: float, planned: Parameters, holding: bool = True) -> str | None:
         """A description of the calibration if the controller's model (built with ``planned``) should be
@@ -97,8 +101,7 @@ class RunEstimators:
         est = self.primary
         if not est.k or not self._follows or not holding or t < self._last_t + self._interval:
             return None
-        cal = est.calibration()
-        known = {name: v for name, v in cal.items() if name in self._learns and v["sigma"] < self._threshold}
+        known = self._known()
         # the first time they are known, a re-plan from the estimate even if they have not moved (a second run,
         # planned with them): planned from the held field, the steady T_sup fell by 0.25-0.3 points with the
         # nominal parameters alone (tuning seeds 10-12, default, fixed)
@@ -106,8 +109,8 @@ class RunEstimators:
                          all(abs(v["value"] - getattr(planned, name)) <= self._threshold for name, v in known.items())):
             return None
         self._last_t = t
-        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})" for k, v in cal.items()
-                        if k in self._learns)
+        now = ", ".join(f"{k} {100 * v['value']:+.1f} % (+-{100 * v['sigma']:.1f})"
+                        for k, v in est.calibration().items() if k in self._learns)
         return f"calibration at t = {t:.1f} s: {now}"
 
     def outputs(self, shadow: Array | None, phi_tc: Array, fe: Any) -> dict[str, Any]:
