@@ -168,6 +168,29 @@ def test_no_tc_drops_out_while_none_of_them_reads(detector_factory) -> None:
     assert [(d.target, d.kind, round(d.t, 6), round(d.onset, 6)) for d in found] == [("TC3", "dropout", 4.4, 4.0)]
     assert det.excluded.tolist() == [False, False, True]
 
+def test_a_tc_the_link_cannot_bring_is_not_a_dropout(detector_factory) -> None:
+    """After a reconnection a busy OPC UA server delivered TC1's subscription seconds before TC3's and TC4's (a
+    CI run of tests/furnace/test_o6_interop.py): TC3 ``unlinked`` while TC1 reads is the link's doing, not a
+    dropout, for as long as it lasts.  Once the link brings nothing for it either (``missing``), it counts:
+    declared dropout_s (5 samples) after that, its counter where the link's spell left it (0 here)."""
+    det, rng = detector_factory(), np.random.default_rng(3)
+    for j in range(10):
+        det.screen(0.1 * j, _readings(rng), ("good",) * 4)
+    found = []
+    for j in range(10, 40):  # 3 s: TC1, TC2 read; TC3 and TC4 not yet subscribed again
+        values = _readings(rng)
+        values[2:] = np.nan
+        y = det.screen(0.1 * j, values, ("good", "good", "unlinked", "unlinked"))
+        found += det.update(0.1 * j, np.zeros(1), None)
+    assert found == [] and not det.excluded.any() and np.isnan(y[2])
+    for j in range(40, 50):  # the grace is over and TC3 still gives nothing: a dropout of its own
+        values = _readings(rng)
+        values[2] = np.nan
+        det.screen(0.1 * j, values, ("good", "good", "missing", "good"))
+        found += det.update(0.1 * j, np.zeros(1), None)
+    assert [(d.target, d.kind, round(d.t, 6), round(d.onset, 6)) for d in found] == [("TC3", "dropout", 4.4, 4.0)]
+
+
 
 def test_stuck_needs_one_second_of_one_value_and_noise_never_is(detector_factory) -> None:
     det, rng = detector_factory(), np.random.default_rng(1)

@@ -48,23 +48,26 @@ def test_a_simulated_sample_read_again_is_the_same(small_radiation) -> None:
     assert not np.array_equal(f.read(0.1).values, first.values)
 
 
+def _tc2_lost(t: float) -> tuple[str, ...]:
+    return ("good",) * 4 if t < 1.0 - 1e-9 else ("good", "missing", "good", "good")
+
+
 class _RealLike:
-    """A furnace as a real one looks to the loop: no true field, TC2 lost from 1 s on."""
+    """A furnace as a real one looks to the loop: no true field, the readings' statuses as ``statuses(t)`` says
+    (by default TC2 lost from 1 s on)."""
 
     kind = "test"
     realtime = False
 
-    def __init__(self, inner: SimulatedFurnace) -> None:
-        self.inner = inner
+    def __init__(self, inner: SimulatedFurnace, statuses=_tc2_lost) -> None:
+        self.inner, self.statuses = inner, statuses
         self.t_s, self.tc_positions = inner.t_s, inner.tc_positions
 
     def read(self, t: float) -> Readings:
         r = self.inner.read(t)
-        if t < 1.0 - 1e-9:
-            return r
-        values = r.values.copy()
-        values[1] = np.nan
-        return Readings(values, r.timestamps, ("good", "missing", "good", "good"))
+        status = self.statuses(t)
+        values = np.where([st == "good" for st in status], r.values, np.nan)
+        return Readings(values, r.timestamps, status)
 
     def apply(self, u, t):
         self.inner.apply(u, t)
@@ -157,3 +160,39 @@ def test_loop_and_furnace_agree_on_the_motion(small_radiation) -> None:
     expected = [0.02 * np.sin(2 * np.pi * s.t / 2.0) for s in snaps]
     np.testing.assert_allclose([s.eta for s in snaps], expected, atol=1e-12)
     assert loop.furnace.motion(0.5).oscillation.enabled
+
+
+def _freeze_then_link_lost(t: float) -> tuple[str, ...]:
+    """The third-party furnace of tests/furnace/test_o6_interop.py, frozen at 1 s: its readings late (missing)
+    until the client gives the link up at 1.5 s, none while it reconnects (unlinked), TC3's subscription
+    delivering 0.5 s after the others' on the new connection, all on time from 3 s."""
+    if 1.0 - 1e-9 <= t < 1.5 - 1e-9:
+        return ("missing",) * 4
+    if 1.5 - 1e-9 <= t < 2.5 - 1e-9:
+        return ("unlinked",) * 4
+    if 2.5 - 1e-9 <= t < 3.0 - 1e-9:
+        return ("good", "good", "unlinked", "unlinked")
+    return ("good",) * 4
+
+
+def test_a_lost_link_is_neither_late_nor_a_dropout(small_radiation) -> None:
+    """Readings the link could not bring (``unlinked``) are the link's outage: not late samples, no TC's dropout
+    (TC3 without readings for 1.5 s while TC1 and TC2 read, where dropout_s is 0.5 s), and the run of late
+    samples that the freeze opened ends when the readings are on time again, not when the link is lost (a
+    CI run said "samples on time again" at the loss, 1 s before the readings returned)."""
+    cfg = small_config()
+    scenario = Scenario.model_validate({"reference": {"setpoint": 600.0, "t_E": 4.0}, "duration": 4.0,
+                                        "truth": "shared"})
+    furnace = _RealLike(SimulatedFurnace.for_scenario(cfg, scenario, small_radiation), _freeze_then_link_lost)
+    loop = ClosedLoop(cfg, scenario, small_radiation, furnace=furnace)
+    snaps = list(loop.run())
+    events = [(s.t, e) for s in snaps for e in s.events]
+    assert loop.late_samples == 5 and loop.metrics()["late_samples"] == 5  # the freeze's 1.0-1.4 s only
+    late = [(round(t, 6), e.split(":")[0]) for t, e in events if "late" in e or "on time again" in e]
+    assert late == [(1.0, "sample at t = 1.0 s late"), (3.0, "samples on time again at t = 3.0 s after 5 late (5 in "
+                                                             "this run)")], late
+    assert not [e for _, e in events if "dropout" in e], events
+    assert not loop.detector.excluded.any()
+    status = loop.timeseries()["tc_status"]
+    t = np.array([s.t for s in snaps])
+    assert (status[(t > 1.45) & (t < 2.45)] == 3).all() and (status[(t > 0.95) & (t < 1.45)] == 2).all()

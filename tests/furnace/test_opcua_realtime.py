@@ -132,7 +132,7 @@ def test_emulator_killed_mid_run_ends_plant_lost_with_its_data(tmp_path) -> None
         npz = np.load(io.BytesIO(c.get(f"/api/runs/{run_id}/timeseries").content))
         t = npz["t"]
         assert len(t) >= 20 and t[-1] >= 2.0
-        assert (npz["tc_status"][-5:] == 2).all()  # its last samples: nothing came
+        assert (npz["tc_status"][-5:] == 3).all()  # its last samples: the link was down ("unlinked"), nothing came
         metrics = c.get(f"/api/runs/{run_id}/metrics")
         assert metrics.status_code == 200 and metrics.json()["status"] == "plant_lost"  # the ending, not only a code
         assert metrics.json()["status_reason"] == body["status_reason"]

@@ -11,7 +11,8 @@ controller commanded -- never the furnace's injected faults.  Per sample:
    While none of TC1..3 reads, no TC's dropout is counted: the furnace or the link to it is out (an
    outage, which the loop reports), and a TC left out for it would not be used again when the readings
    return (they are re-admitted only once they agree with an estimate that ran blind); a TC that still
-   gives nothing ``dropout_s`` after the others came back has dropped out.
+   gives nothing ``dropout_s`` after the others came back has dropped out.  Nor is a TC whose reading the
+   link could not bring (status ``unlinked``: its subscription on a new connection has not delivered yet).
 2. :meth:`FaultDetector.update` (after the update) runs the innovation tests: finite-memory GLR
    tests (:mod:`twin.estimation.glr`) of an offset or a drift on each of TC1..3 and of a lost
    fraction of each lamp group's power ("power that the model cannot explain"), on the readings of
@@ -158,7 +159,8 @@ class FaultDetector:
         same = usable & np.isfinite(self._last) & (np.abs(y - self._last) <= s.flat_tolerance)
         self._flat = np.where(same, self._flat + 1, 0)
         isolating = bool(usable[:N_EKF_TCS].any())  # a dropout is one TC's only while another reads
-        self._unusable = np.where(usable, 0, self._unusable + int(isolating))  # an outage counts for none
+        linked = np.array([st != "unlinked" for st in status])  # the link could not bring it: not the TC's
+        self._unusable = np.where(usable, 0, self._unusable + int(isolating) * linked)  # an outage counts for none
         self._last = y
         self._y = y
         if self._reported[3] and usable[3] and self._flat[3] == 0:

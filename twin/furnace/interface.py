@@ -46,8 +46,10 @@ from twin.scenario import FaultSpec, OscillationSpec
 Array = NDArray[np.float64]
 
 #: "good": a fresh reading of this sample; "bad": the sensor reports a fault (value not usable);
-#: "missing": no reading arrived for this sample (late or lost).
-TCStatus = Literal["good", "bad", "missing"]
+#: "missing": no reading arrived for this sample (late or lost); "unlinked": none could arrive, the link to the
+#: furnace being down or this TC's subscription on a new connection not delivering yet (a real-time furnace:
+#: :func:`twin.furnace.opcua.furnace.unlinked_channels`); the fault detection does not count it against the TC.
+TCStatus = Literal["good", "bad", "missing", "unlinked"]
 N_ESTIMATOR_TCS = 3  # TC1..TC3 feed the EKF; TC4 only validates (paper section 3.2)
 
 

@@ -295,7 +295,9 @@ class ClosedLoop:
         return PositionFeedforward.of(self.tables, oscillation, self.cfg)
 
     def _note_lateness(self, readings: Readings, t: float) -> None:
-        """Count a sample with missing readings; an event when a run of late samples starts and ends."""
+        """Count a sample with missing readings; an event when a run of late samples starts and ends.  A sample
+        with readings the link could not bring (``unlinked``) is neither late nor on time: a run of late samples
+        that the link's loss interrupts ends when the readings are on time again."""
         missing = [f"TC{i + 1}" for i, st in enumerate(readings.status) if st == "missing"]
         if missing:
             self.late_samples += 1
@@ -303,7 +305,7 @@ class ClosedLoop:
             if self._late_run == 1:
                 self._events.append(f"sample at t = {t:.1f} s late: no {', '.join(missing)} in time "
                                     "(the EKF predicts without them)")
-        elif self._late_run:
+        elif self._late_run and "unlinked" not in readings.status:
             self._events.append(f"samples on time again at t = {t:.1f} s after {self._late_run} late "
                                 f"({self.late_samples} in this run)")
             self._late_run = 0

@@ -383,7 +383,9 @@ def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def late_samples(ts: Mapping[str, Any]) -> int:
-    """Samples with a missing (late or lost) TC reading, from ``tc_status`` (0 if the series is absent)."""
+    """Samples with a missing (late or lost) TC reading, from ``tc_status`` (0 if the series is absent); a reading
+    the link could not bring (``unlinked``: the link down or its subscription not yet made again) is the link's
+    outage, which the run's events and status reason name, not a late sample."""
     from twin.runs.record import TC_STATUS_CODES
 
     status = np.asarray(ts.get("tc_status", np.zeros((0, 4))))

@@ -104,9 +104,17 @@ class BlindWatch:
 
 def blind_cause(status: tuple[str, ...], excluded: Any, info: Any) -> str:
     """Why none of TC1..3 reached the estimate this sample (for the events), from the readings' status, the
-    fault detection's left-out TCs and the estimator's update."""
+    fault detection's left-out TCs and the estimator's update.
+
+    >>> blind_cause(("unlinked",) * 4, None, None)
+    'no readings came from the furnace: the link to it was down or being made again'
+    >>> blind_cause(("missing", "unlinked", "missing", "good"), None, None)
+    'no readings came from the furnace'
+    """
     st = tuple(status[:N_ESTIMATOR_TCS]) or ("good",) * N_ESTIMATOR_TCS
-    if all(s == "missing" for s in st):
+    if all(s == "unlinked" for s in st):
+        return "no readings came from the furnace: the link to it was down or being made again"
+    if all(s in ("missing", "unlinked") for s in st):
         return "no readings came from the furnace"
     if all(s != "good" for s in st):
         return "the TCs report no usable value"

@@ -74,7 +74,7 @@ FIELD_SERIES = ("field_hat", "field_true", "shadow_field_hat", "field_sigma")
 OPTIONAL_SERIES = ("parameters", "parameter_sigma", "shadow_T_mean_hat", "shadow_tc_hat", "shadow_field_hat",
                    "field_sigma", "sigma_mean", "nis", "nees")
 #: ``tc_status`` codes of the reading statuses of :class:`twin.furnace.interface.Readings`
-TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2}
+TC_STATUS_CODES = {"good": 0, "bad": 1, "missing": 2, "unlinked": 3}
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,7 @@ class Snapshot:
     shadow_T_mean_hat: float | None = None  # the shadow estimator's fillet mean, TCs and field
     shadow_tc_hat: Array | None = None
     shadow_field_hat: Array | None = None
-    tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" per TC; () = all good
+    tc_status: tuple[str, ...] = ()  # "good" / "bad" / "missing" / "unlinked" per TC; () = all good
     late_samples: int = 0  # samples of the run so far with a reading that did not come in time
     blind_since: float | None = None  # run time since which no TC reading reached the estimate (degraded)
     field_sigma: Array | None = None  # (N_y, N_x) standard deviation of field_hat, K

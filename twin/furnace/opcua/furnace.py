@@ -5,7 +5,10 @@ the subscription fills a :class:`twin.furnace.opcua.samples.SampleBuffer`, and t
 
 * reads sample t_j = j t_s with :meth:`OpcUaFurnace.read`, which waits for the furnace's sample j (the
   furnace's clock drives the run) until it is late; what did not come is ``missing`` and the estimator
-  predicts without it.  ``read(0.0)`` starts the run clock at the furnace's newest sample;
+  predicts without it.  ``read(0.0)`` starts the run clock at the furnace's newest sample.  A reading the link
+  could not bring is ``unlinked`` instead (:func:`unlinked_channels`: the link is down, or on a new connection
+  that channel's subscription has not delivered yet), so the fault detection does not take it for the TC's
+  dropout;
 * applies the group powers with :meth:`OpcUaFurnace.apply`: one Write request with the six setpoints and
   the watchdog (incremented every sample), sent without waiting for the answer.
 
@@ -60,6 +63,30 @@ _COUNTER_MODULUS = {"Byte": 2**8, "SByte": 2**7, "UInt16": 2**16, "Int16": 2**15
                     "Int32": 2**31, "UInt64": 2**64, "Int64": 2**63}
 
 
+def unlinked_channels(state: str, began: float, connected_since: float, heard: list[float], now: float,
+                      grace_s: float) -> list[bool]:
+    """Per channel: is a reading that did not come the link's doing rather than the furnace's?
+
+    Yes while the link is not ``connected`` (down, reconnecting, given up); and, for ``grace_s`` after a
+    (re)connection (the time a request may take, ``options.connect_timeout_s``), for a channel that has sent
+    nothing over it yet (``heard[i]``: monotonic s of its latest reading, older than ``began``, when the
+    connection's attempt began): a subscription's first notification answers its creation, and a busy server
+    can send some channels' seconds after others'.  After the grace a silent channel is ``missing`` again: a TC
+    that is dead on the furnace is still found, at most ``grace_s`` later.
+
+    >>> unlinked_channels("connected", 10.0, 10.5, [10.6, 9.9], now=11.0, grace_s=5.0)
+    [False, True]
+    >>> unlinked_channels("connected", 10.0, 10.5, [10.6, 9.9], now=16.0, grace_s=5.0)
+    [False, False]
+    >>> unlinked_channels("reconnecting", 10.0, 10.5, [10.6, 9.9], now=16.0, grace_s=5.0)
+    [True, True]
+    """
+    if state != "connected":
+        return [True] * len(heard)
+    fresh = now - connected_since < grace_s
+    return [fresh and h < began for h in heard]
+
+
 class _IoThread:
     """An event loop on a daemon thread; coroutines are handed to it from other threads."""
 
@@ -111,6 +138,7 @@ class OpcUaFurnace:
         self._link = FurnaceLink(LinkSettings(endpoint, options, Path(cert_dir), self.node_map, CHANNELS,
                                               watched=(names.LAMPS_ENABLED,)), self._reading, self._on_state)
         self._reading_connection = -math.inf  # the connection (its connected_since) the last reading came on
+        self._heard = [-math.inf] * len(CHANNELS)  # monotonic s of each channel's latest reading
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta = 0.0
@@ -186,10 +214,14 @@ class OpcUaFurnace:
         self._check_alive()
         self._taken_late = self._buffer.overdue_s
         origin = self._buffer.origin or 0.0
+        link = self._link
+        unlinked = unlinked_channels(link.state, link.connection_began, link.connected_since, self._heard[:4],
+                                     time.monotonic(), self.options.connect_timeout_s)
         values, stamps, status = np.full(4, np.nan), np.full(4, np.nan), []
         for i in range(4):
             r = slot[i]
-            st: TCStatus = "missing" if r is None else ("good" if r.good and math.isfinite(r.value) else "bad")
+            st: TCStatus = ("unlinked" if unlinked[i] else "missing") if r is None else \
+                ("good" if r.good and math.isfinite(r.value) else "bad")
             status.append(st)
             if r is not None:
                 stamps[i] = r.source_s - origin
@@ -245,6 +277,7 @@ class OpcUaFurnace:
             if self._reading_connection > -math.inf:
                 self._buffer.relearn()
             self._reading_connection = connection
+        self._heard[channel] = max(self._heard[channel], arrival)
         self._buffer.add(channel, value, good, source_s, arrival)
 
     def _on_state(self, name: str, value: Any, good: bool, source_s: float) -> None:

@@ -112,6 +112,8 @@ class FurnaceLink:
         self.nodes: dict[str, ResolvedNode] = {}
         self.state = "new"  # the transport: new, connected, reconnecting, down (not restored), closed
         self.connected_since = -math.inf  # monotonic s of the latest (re)connection
+        self.connection_began = -math.inf  # monotonic s at which the attempt that made it began (readings that
+        # arrived since then came over it: its subscription can deliver before the attempt returns)
         self.lost_reason: str | None = None  # set when the furnace is given up
         self.events: deque[str] = deque()  # for the run's event log (read from another thread)
         self._reconnect_task: asyncio.Task[None] | None = None
@@ -121,6 +123,7 @@ class FurnaceLink:
         from asyncua import Client, ua
 
         o = self.s.options
+        began = time.monotonic()
         client = Client(self.s.endpoint, timeout=o.connect_timeout_s, watchdog_intervall=1.0)
         await secure_client(client, security=o.security, cert_dir=self.s.cert_dir, username=o.username,
                             password=o.secret())
@@ -160,7 +163,7 @@ class FurnaceLink:
             raise
         client.connection_lost_callback = self._lost
         self._client, self.nodes, self.state = client, nodes, "connected"
-        self.connected_since = time.monotonic()
+        self.connection_began, self.connected_since = began, time.monotonic()
 
     async def open(self) -> None:
         """The first connection; :class:`FurnaceUnavailable` with a message if it fails."""
