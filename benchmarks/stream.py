@@ -24,14 +24,17 @@ Long run (``long_sim_s`` simulated seconds at speed ``max``, 2 clients attached)
   ``rss_baseline_mb``, ``rss_peak_mb``, ``rss_after_mb`` (after the run ended), ``long_run_sim_s``,
   ``long_run_rtf`` (its speed: simulated s per wall s);
 - ``closed_loop_rtf_bare``: the same scenario stepped in this process without a server, over its first
-  ``bare_sim_s`` simulated seconds (240 s: the paper's heat-up and hold, with the re-plan in the hold);
+  ``bare_sim_s`` simulated seconds (240 s: the paper's heat-up and hold, with the re-plan in the hold), waiting
+  for a re-plan as the server's run at speed max does (its simulated time stands still until the plan is in);
   ``max_speed_rtf_with_clients``: the long run's own speed over the same simulated span (from the first frame
   its clients received), from its frames' ``t`` and ``wall_time`` (when the run's process computed the sample);
-  their ratio ``max_speed_rtf_ratio``.  Like for like: until stop 34 the ratio set the whole hour's speed against
-  the bare loop's first minute, where a sample is cheaper (bare loop, default furnace: rtf 29 over 0-60 s, 21 over
-  60-240 s, 19-22 later).  Measured both ways in one run (stop 34, a loaded machine): 0.46 the old way, 0.48 like
-  for like; the server's own run went at 15.1 over the first 240 s against 18.3 over the hour.  So the gap is
-  the server's, not the phases'.
+  their ratio ``max_speed_rtf_ratio``.  Like for like, the same span and the same run: until stop 34 the ratio
+  set the whole hour's speed against the bare loop's first minute, where a sample is cheaper (bare loop, default
+  furnace: rtf 29 over 0-60 s, 21 over 60-240 s, 19-22 later) and which stepped on while its re-plan was being
+  solved (the server's run waits for it, as the CLI's inline re-plan does).  Measured on a machine loaded by a
+  niced mutation run, one bench each: the old way 0.46; the same span 0.48 (server 15.1, bare 31.8); the same span
+  and the bare loop waiting for its re-plan 1.07 (server 17.4, bare 16.3).  The gap was the re-plan's wait and the
+  phases, not the server.
 """
 
 from __future__ import annotations
@@ -278,6 +281,8 @@ def _bare_rtf(cfg: FurnaceConfig, sim_s: float) -> float:
         t0 = time.perf_counter()
         first = last = loop.step()
         while not loop.done and last.t - first.t < sim_s:
+            while loop.replanning:  # as the server's run does at speed max (backend.runs.worker.RunWorker.advance)
+                time.sleep(0.02)
             last = loop.step()
         return float((last.t - first.t) / (time.perf_counter() - t0))
     finally:
