@@ -33,8 +33,8 @@ Long run (``long_sim_s`` simulated seconds at speed ``max``, 2 clients attached)
   furnace: rtf 29 over 0-60 s, 21 over 60-240 s, 19-22 later) and which stepped on while its re-plan was being
   solved (the server's run waits for it, as the CLI's inline re-plan does).  Measured on a machine loaded by a
   niced mutation run, one bench each: the old way 0.46; the same span 0.48 (server 15.1, bare 31.8); the same span
-  and the bare loop waiting for its re-plan 1.07 (server 17.4, bare 16.3).  The gap was the re-plan's wait and the
-  phases, not the server.
+  and the bare loop waiting for its re-plan 1.07 (server 17.4, bare 16.3), and 0.73 in a second run (13.6, 18.7).
+  Most of the gap was the re-plan's wait and the phases, not the server.
 """
 
 from __future__ import annotations
