@@ -231,8 +231,7 @@ def _load_phase(srv: _Server, *, n_clients: int, client_fps: float, t_s: float, 
     return out
 
 
-def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float,
-                window_sim_s: float | None = None) -> dict[str, float]:
+def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float, window_sim_s: float) -> dict[str, float]:
     run_id = srv.start_run({"duration": long_sim_s, "speed": "max"})
     rows: list[list[Row]] = []
     samples: list[tuple[float, float]] = []  # (simulated t, RSS MB)
@@ -254,11 +253,9 @@ def _long_phase(srv: _Server, *, long_sim_s: float, baseline_sim_s: float,
     after = _memory_mb(srv.proc.pid)
     base = [m for t, m in samples if t >= baseline_sim_s]
     run = [r for r in rows[0] if r[3] in ("running", "finished")]
-    out = {"rss_baseline_mb": base[0], "rss_peak_mb": max(base), "rss_growth_mb": max(base) - base[0],
-           "rss_after_mb": after, "long_run_sim_s": long_sim_s, "long_run_rtf": _frames_rtf(run)}
-    if window_sim_s is not None:
-        out["max_speed_rtf_with_clients"] = _frames_rtf([r for r in run if r[2] <= window_sim_s + 1e-9])
-    return out
+    return {"rss_baseline_mb": base[0], "rss_peak_mb": max(base), "rss_growth_mb": max(base) - base[0],
+            "rss_after_mb": after, "long_run_sim_s": long_sim_s, "long_run_rtf": _frames_rtf(run),
+            "max_speed_rtf_with_clients": _frames_rtf([r for r in run if r[2] <= window_sim_s + 1e-9])}
 
 
 def _frames_rtf(frames: list[Row]) -> float:
