@@ -45,6 +45,7 @@ VARIANTS = {
 COLUMNS = (
     ("true_mean_error_transient_max", "true mean error, transient"),
     ("true_mean_error_transient_after_15s", "… after 15 s"),
+    ("lamps_off_lead_max", "lamps-off bound, transient"),
     ("true_mean_error_steady_max", "true mean error, steady"),
     ("full_power_steady_max", "full power, steady (worst group)"),
     ("true_inhomogeneity_steady", "true T_sup, steady"),
@@ -69,6 +70,40 @@ def _patient_plans(max_wall_s: float = 1800.0) -> None:
     from twin.control.feedforward import solve_feedforward
 
     replan.solve_feedforward = functools.partial(solve_feedforward, max_wall_s=max_wall_s)  # type: ignore[assignment]
+
+
+#: how long (s) the furnace's free response is followed for the lamps-off bound: its lead on the paper's
+#: reference ends by about 12 s, when the reference outruns the cold plate
+LAMPS_OFF_S = 30.0
+
+
+def lamps_off_bound(cfg: Any, scenario: Any, rad: Any, seconds: float = LAMPS_OFF_S) -> tuple[float, float]:
+    """The reference's largest lead over the furnace left with every lamp off (fraction of the setpoint, >= 0), and
+    when (s), over the first ``seconds``.
+
+    The scenario's furnace (its own truth, seed and start) runs with u = 0; the reference starts where the run's
+    does, at the mean of TC1-3's first reading (:class:`twin.runs.loop.ClosedLoop`).  Lamp power only adds heat
+    (the radiative and conductive flows are monotone in it), so under any controller the true fillet mean is at
+    least this free one, and ``max(free - T_ref)`` bounds the transient error from below: in the paper's heat-up
+    the cold plate warms faster by itself (warm holders, inert gas, walls) than the reference starts."""
+    from twin.control.reference import reference_trajectory
+    from twin.furnace.simulated import SimulatedFurnace
+    from twin.physics.fillet import Fillet
+
+    furnace = SimulatedFurnace.for_scenario(cfg, scenario, rad)
+    y0 = furnace.read(0.0).for_estimator()
+    ref = reference_trajectory(scenario.reference, float(np.nanmean(y0)))
+    fillet = Fillet.of(cfg)
+    n = int(round(seconds / furnace.t_s)) + 1
+    off = np.zeros(cfg.n_groups)
+    lead = np.empty(n)
+    for j in range(n):
+        t = j * furnace.t_s
+        lead[j] = (float(fillet.mean(furnace.true_field())) - float(ref(np.array([t]))[0])) / SETPOINT
+        if j + 1 < n:
+            furnace.apply(off, t)
+    k = int(np.argmax(lead))
+    return max(float(lead[k]), 0.0), k * furnace.t_s
 
 
 def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None) -> dict[str, Any]:
@@ -99,6 +134,7 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
     err = np.abs(np.array([s.true_mean for s in snaps]) - np.array([s.T_ref for s in snaps])) / SETPOINT
     transient = t <= T_E
     metrics = loop.metrics()
+    lead, lead_t = lamps_off_bound(cfg, scenario, rad)
     out = {k: metrics.get(k) for k in ("true_mean_error_transient_max", "true_mean_error_steady_max",
                                        "full_power_steady_max", "true_inhomogeneity_steady",
                                        "inhomogeneity_transient_max", "field_estimation_error_steady_max",
@@ -108,6 +144,8 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
         plan_parameters=None if plan_parameters is None else plan_parameters.model_dump(),
         controller=cfg.control.model_dump(mode="json"),
         true_mean_error_transient_after_15s=float(err[transient & (t >= 15.0)].max()),
+        lamps_off_lead_max=lead,
+        lamps_off_lead_t=lead_t,
         worst_transient_t=float(t[transient][np.argmax(err[transient])]),
         compute_ms_p50=float(np.percentile(loop.compute_ms, 50)),
         compute_ms_p99=float(np.percentile(loop.compute_ms, 99)),
@@ -136,6 +174,32 @@ def cmd_run(args: argparse.Namespace) -> int:
                                                              "true_mean_error_transient_max",
                                                              "true_mean_error_steady_max", "wall_s")}) + "\n")
         sys.stdout.flush()
+    return 0
+
+
+def cmd_bound(args: argparse.Namespace) -> int:
+    """``lamps_off_lead_max`` / ``_t`` into each stored run of ``--out`` without them: the bound depends on the
+    furnace, the reference and the seed only, not on the controller."""
+    from twin.config import load_config
+    from twin.limits import scenario_limits
+    from twin.radiation import radiation_model
+    from twin.scenario import parse_scenario
+
+    known: dict[tuple[str, int], tuple[float, float]] = {}
+    for path in sorted(Path(args.out).glob("*/*/seed_*.json")):
+        run = json.loads(path.read_text())
+        if "lamps_off_lead_max" in run:
+            continue
+        key = (run["furnace"], int(run["seed"]))
+        if key not in known:
+            cfg = load_config(run["furnace"])
+            scenario = parse_scenario({"reference": {"setpoint": SETPOINT, "t_E": T_E}, "duration": DURATION,
+                                       "tc4": [0.5, 0.5], "seed": key[1], "truth": "independent"},
+                                      scenario_limits(cfg))
+            known[key] = lamps_off_bound(cfg, scenario, radiation_model(cfg))
+        run["lamps_off_lead_max"], run["lamps_off_lead_t"] = known[key]
+        path.write_text(json.dumps(run, indent=2))
+        sys.stdout.write(f"{path}: lamps-off bound {100 * known[key][0]:.3f} % at t = {known[key][1]:.1f} s\n")
     return 0
 
 
@@ -196,6 +260,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     r.add_argument("--second-run", action="store_true")
     r.add_argument("--out", default="out/control")
+    b = sub.add_parser("bound", help="add the lamps-off bound to stored runs that lack it (no closed loop: the "
+                                    "furnace's free response from the run's seed)")
+    b.add_argument("--out", default="out/control")
     t = sub.add_parser("table")
     t.add_argument("--out", default="out/control")
     t.add_argument("--write", nargs="+", default=None, metavar="DOC",
@@ -203,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.cmd == "run":
         return cmd_run(args)
+    if args.cmd == "bound":
+        return cmd_bound(args)
     text = table(Path(args.out))
     for doc in args.write or ():
         write_into(Path(doc), text)
