@@ -106,7 +106,9 @@ def lamps_off_bound(cfg: Any, scenario: Any, rad: Any, seconds: float = LAMPS_OF
     return max(float(lead[k]), 0.0), k * furnace.t_s
 
 
-def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None) -> dict[str, Any]:
+def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None,
+            settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """One run of ``variant`` (with ``settings``, furnace-file keys to values, on top) on ``seed``: its JSON."""
     from twin.config import load_config
     from twin.control.calibration_memory import learnt_parameters
     from twin.furnace.simulated import SimulatedFurnace
@@ -116,8 +118,9 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
     from twin.scenario import parse_scenario
 
     cfg = load_config(furnace)
-    if VARIANTS[variant]:
-        cfg = cfg.with_overrides(VARIANTS[variant])
+    overrides = {**VARIANTS[variant], **(settings or {})}
+    if overrides:
+        cfg = cfg.with_overrides(overrides)
     plan_parameters = learnt_parameters(learnt, cfg)
     control: dict[str, Any] = {}
     if plan_parameters is not None:
@@ -154,20 +157,35 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
     return out
 
 
+def settings(pairs: list[str] | None) -> dict[str, Any]:
+    """``--set KEY=VALUE`` pairs as furnace-file overrides (the value read as JSON, else as a string)."""
+    out: dict[str, Any] = {}
+    for pair in pairs or ():
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"control_table.py: --set wants KEY=VALUE, got {pair!r}")
+        try:
+            out[key] = json.loads(text)
+        except json.JSONDecodeError:
+            out[key] = text
+    return out
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     _patient_plans()
     for seed in args.seeds:
-        group = f"{args.variant}-second" if args.second_run else args.variant
+        name = args.name or args.variant
+        group = f"{name}-second" if args.second_run else name
         path = Path(args.out) / args.furnace / group / f"seed_{seed}.json"
         if path.exists():
             continue
         learnt = None
         if args.second_run:
-            first = Path(args.out) / args.furnace / args.variant / f"seed_{seed}.json"
+            first = Path(args.out) / args.furnace / name / f"seed_{seed}.json"
             while not first.exists():  # the first run of this seed may still be going (another process)
                 time.sleep(10.0)
             learnt = json.loads(first.read_text()).get("calibration") or {}
-        result = run_one(args.furnace, args.variant, seed, learnt)
+        result = run_one(args.furnace, args.variant, seed, learnt, settings(args.set))
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(result, indent=2))
         sys.stdout.write(json.dumps({k: result[k] for k in ("furnace", "variant", "seed", "second_run",
@@ -260,6 +278,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     r.add_argument("--second-run", action="store_true")
     r.add_argument("--out", default="out/control")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="a furnace-file setting on top of the variant's, e.g. calibration.replan_threshold=0.02")
+    r.add_argument("--name", default=None, help="the runs' folder under OUT/FURNACE (default: the variant)")
     b = sub.add_parser("bound", help="add the lamps-off bound to stored runs that lack it (no closed loop: the "
                                     "furnace's free response from the run's seed)")
     b.add_argument("--out", default="out/control")
