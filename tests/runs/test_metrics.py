@@ -302,13 +302,16 @@ def test_every_metric_a_run_writes_has_glossary_words_with_a_unit():
     ts["tc_status"] = np.zeros((n_t, 4), np.int8)
     for k in ("T_mean_hat", "tc_hat", "field_hat"):
         ts[f"shadow_{k}"] = ts[k].copy()
+    ts["true_mean_lamps_off"] = np.full(10, float(ts["T_ref"][0]))  # a simulated furnace left alone
     m = run_metrics(ts)
     glossary = metric_glossary()
     written = set(m) - {"shadow"} | set(m["shadow"]) - {"shadow"}
     assert {"coverage_2sigma_steady", "tc4_error_oscillation_amplitude", "calibration", "late_samples",
-            "full_power_steady_max", "true_mean_error_transient_max"} <= written  # the series has every part
+            "full_power_steady_max", "true_mean_error_transient_max",
+            "true_mean_lead_lamps_off_max"} <= written  # the series has every part
     for key in written:
         words = glossary[key]
         assert words["name"] and len(words["meaning"]) > 20 and words["unit"], key
     relative = {k for k, w in glossary.items() if w["unit"] == RELATIVE}
-    assert set(METRIC_KEYS) | {"true_mean_error_transient_max", "tc4_error_oscillation_amplitude"} == relative
+    assert set(METRIC_KEYS) | {"true_mean_error_transient_max", "tc4_error_oscillation_amplitude",
+                               "true_mean_lead_lamps_off_max"} == relative

@@ -357,7 +357,8 @@ def comparison_table(before: list[dict[str, Any]], after: list[dict[str, Any]]) 
     """Markdown table of each metric per experiment as ``before -> after`` (each marked ✗ above its bound),
     plus the true field's transient mean error (held to the estimated one's bound) and the TC4 error's
     component at the oscillation frequency for the oscillating experiments."""
-    keys = [*METRIC_KEYS, "true_mean_error_transient_max", "tc4_error_oscillation_amplitude", "full_power_steady_max"]
+    keys = [*METRIC_KEYS, "true_mean_error_transient_max", "true_mean_lead_lamps_off_max",
+            "tc4_error_oscillation_amplitude", "full_power_steady_max"]
     rows = ["| metric | " + " | ".join(e["name"] for e in after) + " |", "|" + "---|" * (1 + len(after))]
     for key in keys:
         cells = [key]

@@ -75,6 +75,7 @@ from twin.runs.estimators import RunEstimators
 from twin.runs.fault_ride_through import FaultRideThrough
 from twin.runs.guards import DivergenceGuard, EstimateDiverged
 from twin.runs.live_changes import LiveChanges, Plan
+from twin.runs.metrics import LAMPS_OFF_WINDOW_S
 from twin.runs.outage import BlindWatch, blind_cause, run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot
 from twin.runs.series_store import SeriesStore, append_series
@@ -172,10 +173,16 @@ class ClosedLoop:
         self.uncertainty = FieldUncertainty(first.model.fe, 0.0 if model_error is None else
                                             model_error.for_mode(scenario.oscillation.enabled).representation_rms)
         self._has_truth = furnace.true_field() is not None
+        # a simulated furnace left with every lamp off from the start: what no controller can undercut
+        # (true_mean_lead_lamps_off_max, twin.runs.metrics)
+        left_alone = getattr(furnace, "lamps_off_means", None)
+        lamps_off = None if left_alone is None or not self._has_truth else np.asarray(left_alone(
+            self.fillet.mean, min(int(round(LAMPS_OFF_WINDOW_S / self.t_s)), self.n_steps) + 1), float)
         header = RunHeader(
             x=self.x, y=self.y, tc_positions=self.tc_positions, L_s=s.length, W_s=s.width,
             t_E=float(scenario.reference.t_E), setpoint=float(scenario.reference.setpoint),
             group_names=tuple(g.name for g in cfg.lamps.groups), scenario=scenario.to_json(),
+            true_mean_lamps_off=lamps_off,
         )
         # fields at every sample through the metrics' windows (up to 2 t_E), then one per second (memory)
         field_every, full_rate_until = max(1, round(1.0 / self.t_s)), 2.0 * float(scenario.reference.t_E)

@@ -203,6 +203,11 @@ EXTRA_WORDS: dict[str, tuple[str, str]] = {
     "full_power_steady_max": (
         "Full power, steady (max share)",
         "largest share of the steady window's samples that any lamp group spends at full power (u >= 0.999)"),
+    "true_mean_lead_lamps_off_max": (
+        "Lamps-off bound, transient",
+        "largest lead of the true fillet mean over the reference with every lamp off, in the first "
+        "30 s: the same furnace left alone warms by itself (warm holders, gas), and lamp power only adds heat, so no "
+        "controller's true transient error is below it (simulations only)"),
     "late_samples": (
         "Late samples",
         "samples with a TC reading that did not come in time (a real-time furnace; 0 for a simulation)"),
@@ -223,6 +228,7 @@ METRIC_UNITS: dict[str, str] = {
     "nees_mean": "1 (normalised square; 1 when consistent)",
     "nis_mean": "1 (normalised square; 1 when consistent)",
     "full_power_steady_max": "share of the steady window's samples (0-1)",
+    "true_mean_lead_lamps_off_max": RELATIVE,
     "late_samples": "samples (count)",
     "calibration": "fraction of the model's nominal value",
 }
@@ -353,7 +359,13 @@ def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np
     window, relative),
     ``calibration`` ({name: {"value", "sigma"}} at the end of a calibrating run), ``shadow`` (the shadow
     estimator's metrics) and ``full_power_steady_max`` (the largest fraction of the steady window any lamp group
-    spends at full power, u >= :data:`FULL_POWER`)."""
+    spends at full power, u >= :data:`FULL_POWER`) and, for a simulated furnace, ``true_mean_lead_lamps_off_max``
+    (:func:`lamps_off_lead` of the header's ``true_mean_lamps_off`` over the samples before the first live change)."""
+    if "true_mean_lamps_off" in ts and t.size:  # issue 26: what no controller can undercut, before a live change
+        change = np.asarray(ts.get("change_t", np.zeros(0)), float)
+        before = t < float(change.min()) if change.size else np.ones(t.size, bool)
+        out["true_mean_lead_lamps_off_max"] = lamps_off_lead(
+            np.asarray(ts["true_mean_lamps_off"], float), np.asarray(ts["T_ref"], float)[before], float(ts["setpoint"]))
     if "u" in ts and st.any():  # issue 26: no lamp group at full power for long in the steady window
         u_st = np.asarray(ts["u"], float)[st]
         out["full_power_steady_max"] = float(np.max(np.mean(u_st >= FULL_POWER, axis=0)))
@@ -375,6 +387,25 @@ def _extras(ts: Mapping[str, Any], out: dict[str, Any], t: Array, st: NDArray[np
             shadow[k] = ts[f"shadow_{k}"]
         out["shadow"] = compute_metrics(shadow)
     return out
+
+
+#: how long (s) from a run's start the furnace left with its lamps off is followed (``true_mean_lead_lamps_off_max``):
+#: a cold plate's lead on a heating reference ends when the reference outruns it, about 12 s into the paper's run
+LAMPS_OFF_WINDOW_S = 30.0
+
+
+def lamps_off_lead(free_mean: Array, T_ref: Array, setpoint: float) -> float:
+    """``true_mean_lead_lamps_off_max``: the largest lead (>= 0, fraction of ``setpoint``) of ``free_mean``, the true
+    fillet mean of the furnace left with every lamp off (K, from the run's start, one per sample), over the reference
+    at the same samples; only their common samples count.
+
+    >>> lamps_off_lead(np.array([300.0, 303.0, 306.0]), np.array([298.0, 299.0, 310.0]), 1000.0)
+    0.004
+    """
+    n = min(len(free_mean), len(T_ref))
+    if n == 0:
+        return 0.0
+    return max(float(np.max(np.asarray(free_mean[:n], float) - np.asarray(T_ref[:n], float))) / float(setpoint), 0.0)
 
 
 def run_metrics(ts: Mapping[str, Any]) -> dict[str, Any]:

@@ -135,10 +135,16 @@ class RunHeader:
     setpoint: float
     group_names: tuple[str, ...]
     scenario: str
+    #: a simulated furnace's true fillet mean (K) at the samples from the start with every lamp off
+    #: (``SimulatedFurnace.lamps_off_means``; the metric ``true_mean_lead_lamps_off_max``), ``None`` for a furnace
+    #: that cannot be left alone (a real one)
+    true_mean_lamps_off: Array | None = None
 
     def arrays(self) -> dict[str, Any]:
         out: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
         out["group_names"] = np.asarray(self.group_names)
+        if self.true_mean_lamps_off is None:
+            del out["true_mean_lamps_off"]
         return out
 
     @classmethod
@@ -150,6 +156,7 @@ class RunHeader:
             L_s=float(a["L_s"]), W_s=float(a["W_s"]), t_E=float(a["t_E"]), setpoint=float(a["setpoint"]),
             group_names=tuple(str(g) for g in np.asarray(a["group_names"]).ravel()) if "group_names" in a else (),
             scenario=str(a["scenario"]) if "scenario" in a else "{}",
+            true_mean_lamps_off=np.asarray(a["true_mean_lamps_off"], float) if "true_mean_lamps_off" in a else None,
         )
 
 

@@ -26,7 +26,7 @@ Example
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -95,6 +95,7 @@ class SimulatedFurnace:
         self._rng = np.random.default_rng(seed)
         T_init = np.full(self.plant.n, cfg.specimen.initial_temperature) if T0 is None else T0
         self._state = self.plant.start(T_init, 0.0)
+        self._T_init = np.array(self._state.T, dtype=float)  # the start, for lamps_off_means
         self._sensors: LaggedThermocouples | None = None
         self._lamps: LampLag | None = None
         if truth is not None:
@@ -104,6 +105,7 @@ class SimulatedFurnace:
         self._oscillation = oscillation or OscillationSpec()
         self._since = 0.0
         self._eta_of_t = eta_function(self._oscillation)
+        self._eta_initial = self._eta_of_t
         self.faults = FaultInjector(tuple(g.name for g in cfg.lamps.groups), faults)
         self._others = [_OtherTC4(cfg, place, self._state.T, truth, seed, self.faults) for place in other_tc4]
         # (plant time, readings, the other TC4 places' readings): a repeated read of the same sample gives the same
@@ -213,6 +215,20 @@ class SimulatedFurnace:
 
     def true_field(self) -> Array:
         return self._state.T.copy()
+
+    def lamps_off_means(self, mean: Callable[[Array], float], n: int) -> Array:
+        """``mean`` of the true field (e.g. ``Fillet.mean``) at the samples 0 .. n-1 of this furnace left with every
+        lamp off from its start: its own truth, start and initial motion, a plant of its own (the run's is not
+        touched).  Lamp power only adds heat, so under any input the true field's fillet mean is at least this:
+        the reference's lead over it bounds every controller's transient error from below
+        (``true_mean_lead_lamps_off_max``, :mod:`twin.runs.metrics`)."""
+        state, off = self.plant.start(self._T_init.copy(), 0.0), np.zeros(self.cfg.n_groups)
+        out = np.empty(max(int(n), 0))
+        for j in range(out.size):
+            out[j] = mean(state.T)
+            if j + 1 < out.size:
+                state = self.plant.advance(state, off, self.t_s, self._eta_initial)
+        return out
 
     def drain_events(self) -> tuple[str, ...]:
         return ()
