@@ -1,6 +1,6 @@
 """When the controller's model follows the calibration (twin.runs.estimators.RunEstimators.calibration_due).
 
-Oracle: the rule as the module and default_furnace.toml state it (threshold 0.03, interval 30 s): re-plan only
+Oracle: the rule as the module and default_furnace.toml state it (threshold 0.02, interval 30 s): re-plan only
 when the controller follows, the reference holds still and a parameter a plan takes is known to better than
 the threshold: the first time then, later only when it has moved by more than it since the plan; at most once
 per interval.
@@ -42,7 +42,7 @@ def test_follows_only_while_the_reference_holds(small_radiation) -> None:
     assert run.calibration_due(160.0, Parameters(), holding=True) is not None
 
 
-TH = CFG.calibration.replan_threshold  # 0.03 (default_furnace.toml)
+TH = CFG.calibration.replan_threshold  # 0.02 (default_furnace.toml)
 
 
 @pytest.mark.parametrize(("value", "sigma", "planned", "first", "later"), [
@@ -53,7 +53,7 @@ TH = CFG.calibration.replan_threshold  # 0.03 (default_furnace.toml)
                                                # until planned with it
 ])
 def test_threshold_on_sigma_and_move(small_radiation, value, sigma, planned, first, later) -> None:
-    assert TH == 0.03
+    assert TH == 0.02
     run = _run(small_radiation, follows=True, value=value, sigma=sigma)
     assert (run.calibration_due(200.0, Parameters(lamp_efficiency=planned), holding=True) is not None) is first
     assert (run.calibration_due(240.0, Parameters(lamp_efficiency=planned), holding=True) is not None) is later
