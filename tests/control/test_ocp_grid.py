@@ -20,6 +20,7 @@ MAX_KNOTS = 240; Heun substeps n with h |lambda_max| <= 1, h = knot interval / n
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -165,14 +166,8 @@ def test_untimed_estimate_counts_the_plans_arrays() -> None:
     est = g.estimate(_Model())
     assert est == PlanEstimate(horizon_s=7.5, knots=5, substeps=10, samples=15, n=3, m=4)
     # a grid whose interval is not a multiple of t_s: 1.3 s -> 3 samples (2.6 rounded); 0.2 s -> 1 sample
-    assert dataclasses_replace(g, interval=1.3).estimate(_Model()).samples == 15
-    assert dataclasses_replace(g, interval=0.2).estimate(_Model()).samples == 5
-
-
-def dataclasses_replace(g: PlanGrid, **kw) -> PlanGrid:
-    import dataclasses
-
-    return dataclasses.replace(g, **kw)
+    assert dataclasses.replace(g, interval=1.3).estimate(_Model()).samples == 15
+    assert dataclasses.replace(g, interval=0.2).estimate(_Model()).samples == 5
 
 
 class _Clock:
