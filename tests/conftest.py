@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import sys
+from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -76,3 +80,20 @@ def small_truth_radiation(radiation_cache):
     if key not in _RADIATION:
         _RADIATION[key] = truth_radiation(small_config(), cache_dir=radiation_cache)
     return _RADIATION[key]
+
+
+@pytest.fixture(scope="session")
+def load_script() -> Callable[[str], ModuleType]:
+    """``load_script("control_table")``: the module ``scripts/control_table.py`` (``scripts/`` is not a package),
+    registered in ``sys.modules`` under its name (a dataclass of the module looks itself up there); loaded once."""
+
+    def load(name: str) -> ModuleType:
+        if name not in sys.modules:
+            spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+            assert spec is not None and spec.loader is not None
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            spec.loader.exec_module(module)
+        return sys.modules[name]
+
+    return load

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -11,17 +10,9 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("control_table", REPO / "scripts" / "control_table.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize("doc", ["docs/control.md", "README.md"])
-def test_the_page_shows_the_committed_runs(doc):
-    script = _script()
+def test_the_page_shows_the_committed_runs(doc, load_script):
+    script = load_script("control_table")
     page = (REPO / doc).read_text()
     shown = page.split(script.BEGIN, 1)[1].split(script.END, 1)[0].strip()
     made = script.table(REPO / "docs" / "control_runs").strip()
@@ -30,12 +21,12 @@ def test_the_page_shows_the_committed_runs(doc):
     assert made.count("\n") >= 2  # a header, its rule and at least one row of runs
 
 
-def test_the_table_marks_a_bound_it_misses(tmp_path):
+def test_the_table_marks_a_bound_it_misses(tmp_path, load_script):
     """A made-up run above issue 26's transient bound of its furnace is marked (default 1 %, banded 2 %), one
     below it is not."""
     import json
 
-    script = _script()
+    script = load_script("control_table")
     for furnace, err in (("default", 0.0123), ("banded", 0.03), ("other", 0.05)):
         folder = tmp_path / furnace / "mpc"
         folder.mkdir(parents=True)
@@ -49,7 +40,7 @@ def test_the_table_marks_a_bound_it_misses(tmp_path):
     assert "| banded | mpc | 0 | 1.95 % |" in script.table(tmp_path)
 
 
-def test_no_input_beats_the_lamps_off_bound(small_radiation, small_truth_radiation):
+def test_no_input_beats_the_lamps_off_bound(small_radiation, small_truth_radiation, load_script):
     """The lamps-off bound (the reference's largest lead over the furnace left with every lamp off) rests on lamp
     power only adding heat: the same furnace driven by any u >= 0 is at least as warm, so its true fillet mean
     leads the reference at least as far.  Small furnace, its own truth, the paper's 1100 K / 120 s, first 10 s;
@@ -64,7 +55,7 @@ def test_no_input_beats_the_lamps_off_bound(small_radiation, small_truth_radiati
     from twin.physics.fillet import Fillet
     from twin.scenario import parse_scenario
 
-    script = _script()
+    script = load_script("control_table")
     cfg = small_config()
     scenario = parse_scenario({"reference": {"setpoint": 1100.0, "t_E": 120.0}, "duration": 20.0, "seed": 3,
                                "truth": "independent"}, scenario_limits(cfg))

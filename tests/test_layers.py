@@ -6,22 +6,12 @@ A plain import is enough to break it (``twin`` importing ``backend``, ``twin.con
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def layers():
-    spec = importlib.util.spec_from_file_location("layers", REPO / "scripts" / "layers.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["layers"] = module  # its dataclass looks itself up there
-    spec.loader.exec_module(module)
-    return module
+def layers(load_script):
+    return load_script("layers")
 
 
 def test_no_import_runs_against_the_layers(layers) -> None:

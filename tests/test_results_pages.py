@@ -7,9 +7,7 @@ here; ``python scripts/make_results.py`` writes the pages again.
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -18,12 +16,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def make_results():
-    spec = importlib.util.spec_from_file_location("make_results", REPO / "scripts" / "make_results.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["make_results"] = module
-    spec.loader.exec_module(module)
-    return module
+def make_results(load_script):
+    return load_script("make_results")
 
 
 def test_every_results_page_is_what_its_json_gives(make_results) -> None:

@@ -8,9 +8,6 @@ made another way, by driving the furnace's public ``apply`` with u = 0 (``script
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -20,16 +17,7 @@ from twin.limits import scenario_limits
 from twin.runs.loop import ClosedLoop
 from twin.scenario import parse_scenario
 
-REPO = Path(__file__).resolve().parents[2]
 CFG = small_config()
-
-
-def _control_table():
-    spec = importlib.util.spec_from_file_location("control_table", REPO / "scripts" / "control_table.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _scenario(seed: int, duration: float):
@@ -39,7 +27,7 @@ def _scenario(seed: int, duration: float):
 
 
 @pytest.mark.slow
-def test_a_run_reports_the_bound_below_its_own_transient_error(small_radiation, small_truth_radiation):
+def test_a_run_reports_the_bound_below_its_own_transient_error(small_radiation, small_truth_radiation, load_script):
     sc = _scenario(seed=4, duration=32.0)
     furnace = SimulatedFurnace.for_scenario(CFG, sc, small_radiation, truth_radiation=small_truth_radiation)
     loop = ClosedLoop(CFG, sc, small_radiation, furnace=furnace)
@@ -52,7 +40,7 @@ def test_a_run_reports_the_bound_below_its_own_transient_error(small_radiation, 
     # the cold plate warms by itself faster than the reference leaves its start, and no input does better
     assert 0.0 < bound <= m["true_mean_error_transient_max"] + 1e-12
     # the same bound by the furnace's public path (apply with u = 0, its lamp lag), from a furnace of its own
-    made, _ = _control_table().lamps_off_bound(CFG, sc, small_radiation, seconds=30.0)
+    made, _ = load_script("control_table").lamps_off_bound(CFG, sc, small_radiation, seconds=30.0)
     assert bound == pytest.approx(made, abs=1e-9)
     # the bound's plant starts from the furnace's start, and leaves the run's furnace where it is
     end = furnace.true_field()
