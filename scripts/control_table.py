@@ -137,7 +137,10 @@ def run_one(furnace: str, variant: str, seed: int, learnt: dict[str, Any] | None
     err = np.abs(np.array([s.true_mean for s in snaps]) - np.array([s.T_ref for s in snaps])) / SETPOINT
     transient = t <= T_E
     metrics = loop.metrics()
-    lead, lead_t = lamps_off_bound(cfg, scenario, rad)
+    # the run's own lamps-off bound (its header's free response; lamps_off_bound makes it again for stored runs)
+    free = np.asarray(loop.record.header.true_mean_lamps_off, float)
+    lead, lead_t = float(metrics["true_mean_lead_lamps_off_max"]), float(t[int(np.argmax(
+        free - np.array([s.T_ref for s in snaps[: free.size]])))])
     out = {k: metrics.get(k) for k in ("true_mean_error_transient_max", "true_mean_error_steady_max",
                                        "full_power_steady_max", "true_inhomogeneity_steady",
                                        "inhomogeneity_transient_max", "field_estimation_error_steady_max",
