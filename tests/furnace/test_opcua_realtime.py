@@ -101,8 +101,12 @@ def test_closed_loop_over_opcua_runs_the_in_process_loop_until_timing_disturbs_i
     assert np.max(np.abs(npz["u"][:j0] - ref["u"][:j0]), initial=0.0) == 0.0
     if j0 == len(npz["t"]):  # nothing disturbed the run: its figures are the in-process ones
         assert abs(steady - steady_ref) <= UNDISTURBED, (steady, steady_ref)
-    if stats["interlock_trips"]:  # the furnace switched its lamps off during the run: the twin says so
-        assert any("switched its lamps off" in e for e in events), events
+    # the furnace computed a sample of the run with its lamps off (its interlock tripped while the twin drove it):
+    # the twin says so.  Not stats["interlock_trips"]: that also counts the trip once the finished twin stopped
+    # writing and the emulator outlived it by more than the watchdog's 1 s (a CI run on a loaded machine)
+    off = [k + 1 for k, w in enumerate(stats["applied"][: len(npz["t"]) - 1]) if w == -1]
+    if off:
+        assert any("switched its lamps off" in e for e in events), (off, events)
     for key in ("true_inhomogeneity_steady", "true_mean_error_steady_max", "field_estimation_error_steady_max"):
         assert metrics[key] is None, key  # a furnace over OPC UA has no truth
     assert "field_true" not in npz.files
