@@ -419,6 +419,7 @@ class Calibration(_Section):
     controller_follows: bool = False  # re-plan the controller's model with the calibrated parameters
     replan_threshold: float = Field(gt=0)  # a parameter move (relative) that re-plans the controller
     replan_interval: float = Field(ge=0)  # s between two re-plans for the calibration
+    replan_settled: float = Field(gt=0)  # |estimated mean - reference| / reference below which a re-plan may start
 
 
 class FeedforwardWeights(_Section):

@@ -1,8 +1,9 @@
 """The integrator's transfer to a calibration's re-plan (twin.control.lqg.carried_integrator).
 
 Oracle: the defining equations on hand-made plans and gains (3 states, 3 groups), where the answer is known in
-closed form or found by search: the integrator's part k e_I of the input (eq. 25) gives up the rise of the
-feedforward's level, in least squares over the groups the old input did not clip.
+closed form or found by search, and the controllers' own input (eq. 25, ``feedback_control``) before and after
+the switch: the integrator's part k e_I of the input gives up what the new plan's input carries at the switch,
+in least squares over the groups the old input did not clip.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from twin.control.lqg import Gains, IntegratorState, carried_integrator
+from twin.control.lqg import Gains, IntegratorState, carried_integrator, feedback_control
 from twin.control.plan import FeedforwardPlan
 
 N, n, m = 20, 3, 3
@@ -44,18 +45,23 @@ def test_what_the_new_feedforward_carries_comes_off_the_integrator() -> None:
     assert state.e_I == pytest.approx(-10.0)
 
 
-def test_the_new_plans_level_counts_not_its_first_samples_nor_its_end() -> None:
-    """The new plan starts 1 s lower (it brings an estimate above the reference down itself) and ends with a
-    glitch; its level in between is 0.1 above the old plan's: the integrator gives up 0.1, as with constant plans."""
+def test_the_input_does_not_jump_at_the_switch() -> None:
+    """The new plan starts 0.2 lower than the old one in every group, and later rises (the first samples count,
+    not the plan's later level); the estimate is 3 K off both plans' reference states.  The old and the new
+    controller (feedback_control, eq. 25, on their own plans and gains) apply the same input at the switch."""
     k = np.full(m, -0.01)
     old = _plan(np.array([0.4, 0.5, 0.6]), 1000.0)
-    u_new = np.tile(np.array([0.5, 0.6, 0.7]), (N, 1))
-    u_new[:4] -= 0.3  # the first samples: the plan's own correction
-    u_new[-2:] += 0.5  # the end
-    new = dataclasses.replace(old, u_ff=u_new)
-    state = carried_integrator(old, _gains(-0.02, k), new, _gains(-0.02, k), 0.0, np.full(n, 1000.0),
-                               IntegratorState(-20.0))
-    assert state.e_I == pytest.approx(-10.0)
+    u_new = np.tile(np.array([0.2, 0.3, 0.4]), (N, 1))
+    u_new[4:] += 0.5  # later: another level, which does not count
+    new = dataclasses.replace(old, u_ff=u_new, theta_ref=np.full((N + 1, n), 998.0))
+    theta = np.full(n, 1003.0)
+    g_old, g_new = _gains(-0.02, k), _gains(-0.03, 1.5 * k)
+    state = carried_integrator(old, g_old, new, g_new, 0.0, theta, IntegratorState(-20.0))
+    c_m = np.full(n, 1.0 / n)
+    u_old, _ = feedback_control(g_old, old, c_m, 1.0, 0, theta, IntegratorState(-20.0))
+    u_switch, _ = feedback_control(g_new, new, c_m, 1.0, 0, theta, state)
+    np.testing.assert_allclose(u_switch.u, u_old.u, atol=1e-12)
+    assert 0.0 < u_old.u.min() and u_old.u.max() < 1.0  # no group clipped: all of them matched
 
 
 def test_least_squares_over_the_groups_with_other_gains() -> None:
@@ -65,10 +71,11 @@ def test_least_squares_over_the_groups_with_other_gains() -> None:
     old, new = _plan(np.array([0.3, 0.5, 0.7]), 1000.0), _plan(np.array([0.35, 0.52, 0.8]), 999.0, t0=0.5)
     g_old, g_new = _gains(-0.03, np.array([-0.01, -0.012, -0.008])), _gains(-0.02, rng.uniform(-0.02, -0.005, m))
     state = carried_integrator(old, g_old, new, g_new, 1.0, theta, IntegratorState(-15.0))
-    k_old, k_new = g_old.K_terminal[:, n], g_new.K_terminal[:, n]
-    delta = new.u_ff[0] - old.u_ff[0]
+    K_old, K_new = g_old.K_terminal, g_new.K_terminal
+    u_old = old.u_ff[0] + K_old @ np.append(theta - old.theta_ref[0], -15.0)
     grid = np.linspace(-40.0, 20.0, 60001)
-    best = grid[np.argmin([np.sum((k_new * e - (k_old * -15.0 - delta)) ** 2) for e in grid])]
+    miss = [np.sum((new.u_ff[0] + K_new @ np.append(theta - new.theta_ref[0], e) - u_old) ** 2) for e in grid]
+    best = grid[np.argmin(miss)]
     assert state.e_I == pytest.approx(best, abs=2e-3)
 
 

@@ -344,22 +344,23 @@ def feedback_control(gains: Gains, plan: FeedforwardPlan, c_m: Array, delta0: fl
 
 def carried_integrator(old_plan: FeedforwardPlan, old_gains: Gains, new_plan: FeedforwardPlan, new_gains: Gains,
                        t: float, theta_hat: ArrayLike, state: IntegratorState) -> IntegratorState:
-    """e_I on a new plan of the same goal (a calibration's re-plan): what the new feedforward now carries in the
-    hold comes off the integrator.
+    """e_I on a new plan of the same goal (a calibration's re-plan): the input does not jump at the switch.
 
-    The integrator's part of the input is k e_I (k: the integrator's column of K_j, eq. 25).  With Delta the
-    median over the rest of both plans of u_ff,new - u_ff,old per group (the level the new plan holds; not its
-    first samples, where it corrects the estimate's error itself, nor its end), e_I' solves
-    min sum_g (k_new,g e_I' - (k_old,g e_I - Delta_g))^2 over the groups the old input did not clip (a clipped
-    group gives nothing to match); with every group clipped e_I is kept.  A calibration that found the lamps
-    weaker raises the feedforward, and e_I falls by what it no longer has to make up; it keeps what else it was
-    making up for, which a reset would lose (``theta_hat`` is the estimate at the switch, for the old input)."""
+    The integrator's part of the input is k e_I (k: the integrator's column of K_j, eq. 25).  At the switch the
+    old controller would apply u_old = u_ff,old + K_old (theta_hat - theta_ref,old; e_I) (unclipped), the new one
+    u_ff,new + K_new,theta (theta_hat - theta_ref,new) + k_new e_I'; e_I' solves
+    min sum_g (k_new,g e_I' - (u_old,g - u_ff,new,g - K_new,theta,g (theta_hat - theta_ref,new)))^2 over the
+    groups the old input did not clip (a clipped group gives nothing to match); with every group clipped e_I is
+    kept.  A calibration that found the lamps weaker raises the feedforward, and e_I falls by what it no longer
+    has to make up; it keeps what else it was making up for, which a reset would lose.  Matched at the switch,
+    not over the rest of the plans: the re-plan starts from the held field at the reference's mean
+    (:meth:`twin.runs.live_changes.LiveChanges.request`), so the new plan's first samples already hold; a plan
+    from the estimate itself would correct the mean's error in its first seconds (its first 3 s at zero power
+    on the small furnace 16 s after a 60 s heat-up, 18 K above the reference) while the integrator still made
+    up for it (``theta_hat`` is the estimate at the switch, for the old input)."""
     th = np.asarray(theta_hat, float)
     n = th.size
     j_old, j_new = max(old_plan.index_at(t), 0), max(new_plan.index_at(t), 0)
-    rest = np.arange(max(new_plan.n_steps - j_new, 1))  # beyond its horizon a plan holds its last input
-    u_new = new_plan.u_ff[np.minimum(j_new + rest, new_plan.n_steps - 1)]
-    delta = np.median(u_new - old_plan.u_ff[np.minimum(j_old + rest, old_plan.n_steps - 1)], axis=0)
     u_ff, theta_ref, _ = old_plan.sample(j_old)
     K_old, k_new = old_gains.at(j_old), new_gains.at(j_new)[:, n]
     u_old = u_ff + K_old @ np.append(th - theta_ref, state.e_I)  # unclipped
@@ -367,7 +368,9 @@ def carried_integrator(old_plan: FeedforwardPlan, old_gains: Gains, new_plan: Fe
     kk = float(k_new[free] @ k_new[free])
     if not free.any() or kk <= 0.0:
         return IntegratorState(state.e_I, state.frozen)
-    target = K_old[:, n] * state.e_I - delta
+    u_ff_new, theta_ref_new, _ = new_plan.sample(j_new)
+    K_new = new_gains.at(j_new)
+    target = u_old - (u_ff_new + K_new[:, :n] @ (th - theta_ref_new))  # what the new input lacks at the switch
     return IntegratorState(float(k_new[free] @ target[free]) / kk, state.frozen)
 
 

@@ -6,8 +6,9 @@ reaches the controller.  With ``calibration.controller_follows`` (on for ``defau
 the furnace files) a calibrating estimator asks for a re-plan of the controller's model when a parameter a plan
 takes (``[control] plan_learns``) is known well (its sigma below ``calibration.replan_threshold``): the first time
 from the held field even if it has not moved, later when it has moved by more than the threshold since the
-model in force was built; at most once per ``calibration.replan_interval`` s, and only
-while the reference holds still: during a heat-up the parameters cannot be told apart (lamp efficiency and
+model in force was built; at most once per ``calibration.replan_interval`` s, only once the estimated mean is
+within ``calibration.replan_settled`` of the reference (a re-plan 18 K above it, 16 s after a 60 s heat-up on the
+small furnace, cut the lamps for 3 s), and only while the reference holds still: during a heat-up the parameters cannot be told apart (lamp efficiency and
 emissivity correlate at -0.98 there, ``python scripts/observability.py``) and the truth's latent
 heat looks like weak lamps; a re-plan on such an estimate at 108 s of the default oscillating campaign run
 drove the lamps to full power and overshot the reference by 33 K (3.0 % transient mean error instead of 1.3 %).
@@ -57,6 +58,7 @@ class RunEstimators:
         self._learns = cfg.control.plan_learns  # the learnt parameters a plan may take
         self._threshold = cfg.calibration.replan_threshold
         self._interval = cfg.calibration.replan_interval
+        self._settled = cfg.calibration.replan_settled
         self._last_t = -np.inf
 
     def update(self, y: ArrayLike, learn: bool = True) -> tuple[Array, Array | None]:
@@ -93,13 +95,16 @@ class RunEstimators:
         return {name: v for name, v in self.primary.calibration().items()
                 if name in self._learns and v["sigma"] < self._threshold}
 
-    def calibration_due(self, t: float, planned: Parameters, holding: bool = True) -> str | None:
+    def calibration_due(self, t: float, planned: Parameters, holding: bool = True,
+                        mean_error: float = 0.0) -> str | None:
         """A description of the calibration if the controller's model (built with ``planned``) should be
-        re-planned now (module docstring; ``holding``: the reference holds still at ``t``), else None: a
+        re-planned now (module docstring; ``holding``: the reference holds still at ``t``; ``mean_error``: the
+        estimated mean's error relative to the reference), else None: a
         parameter a plan takes (``[control] plan_learns``) is known well, for the first time in this run or
         moved by more than the threshold since ``planned``."""
         est = self.primary
-        if not est.k or not self._follows or not holding or t < self._last_t + self._interval:
+        if (not est.k or not self._follows or not holding or t < self._last_t + self._interval
+                or abs(mean_error) > self._settled):
             return None
         known = self._known()
         # the first time they are known, a re-plan from the estimate even if they have not moved (a second run,

@@ -248,7 +248,11 @@ class ClosedLoop:
             why = "" if used else blind_cause(readings.status, self.detector.excluded, info)
             self._events.extend(self.blindness.note(t, used, why))
             self.faults.on_detections(t, self.detector.update(t, theta_prior, self.estimator.last_info))
-            due = None if changes.busy else self.estimators.calibration_due(t, changes.current.parameters, holding)
+            due = None
+            if not changes.busy and holding:
+                T_ref_j = float(changes.ref_samples[j])
+                settle = (float(changes.current.model.c_m @ theta) - T_ref_j) / T_ref_j
+                due = self.estimators.calibration_due(t, changes.current.parameters, holding, settle)
             if due is not None:  # the controller's model follows the calibration (re-planned like a change)
                 changes.request("calibration", due)
             ctl = changes.current
