@@ -176,7 +176,7 @@ SUMMARY_HEAD = """# Mutation testing
 Written by `bash scripts/mutation.sh MODULE...` (`scripts/mutation_modules.py`; mutmut with the settings of
 `[tool.mutmut]` in pyproject.toml).  Each module's result is cached under the SHA-256 of its source, its
 selected tests and the settings, and listed here with its date and hash; a module whose code or tests changed
-since is "not run" until it is run again.  Every mutant counts: raw score = (killed + timeout) / mutants; a
+since is marked "stale" (its row as measured then, not in the total) until it is run again.  Every mutant counts: raw score = (killed + timeout) / mutants; a
 mutant the run never reached is "not run" and counts as not detected.  A survivor is equivalent only when
 `scripts/mutation_equivalent.toml` names it (a `[mutant."name"]` entry) with a reason and a second look;
 the issue-17 regex rules are not applied.  The full report with every survivor's diff is an artifact
@@ -186,31 +186,42 @@ the issue-17 regex rules are not applied.  The full report with every survivor's
 
 
 def summary(modules: list[str]) -> str:
+    """The table: a row per module with a result; a result whose module or selected tests changed since its run
+    is shown as it was measured, marked stale, and left out of the total (the total counts current results)."""
     eq = equivalents()
     head = ("| module | mutants | killed | timeout | survived | no tests | not run | equivalent | raw score "
             "| date | source hash |")
     rows = [head, "| --- " * 11 + "|"]
     tot: Counter[str] = Counter()
-    not_run = []
+    not_run, stale = [], []
     for module in modules:
         data = cached(module)
-        stale = data is None and _cache_file(module).is_file()
+        if data is None and _cache_file(module).is_file():  # measured on other code or tests: shown, marked
+            data = json.loads(_cache_file(module).read_text())
+            stale.append(module)
         if data is None:
-            not_run.append(f"{module}{' (stale: code or tests changed since its run)' if stale else ''}")
+            not_run.append(module)
             continue
         k = counts(data, eq)
-        for key in ("mutants", "killed", "timeout", "survived", "no tests", "not run", "equivalent"):
-            tot[key] += k[key]
+        current = module not in stale
+        if current:
+            for key in ("mutants", "killed", "timeout", "survived", "no tests", "not run", "equivalent"):
+                tot[key] += k[key]
         rows.append(f"| {module} | {k['mutants']} | {k['killed']} | {k['timeout']} | {k['survived']} | "
                     f"{k['no tests']} | {k['not run']} | {k['equivalent']} | {100 * k['raw']:.1f} % | "
-                    f"{data['date'][:10]} | {data['fingerprint'][:12]} |")
+                    f"{data['date'][:10]}{'' if current else ' (stale)'} | {data['fingerprint'][:12]} |")
     if tot["mutants"]:
         raw = (tot["killed"] + tot["timeout"]) / tot["mutants"]
-        rows.append(f"| **modules run** | {tot['mutants']} | {tot['killed']} | {tot['timeout']} | {tot['survived']} "
-                    f"| {tot['no tests']} | {tot['not run']} | {tot['equivalent']} | **{100 * raw:.1f} %** | | |")
+        rows.append(f"| **current results** | {tot['mutants']} | {tot['killed']} | {tot['timeout']} | "
+                    f"{tot['survived']} | {tot['no tests']} | {tot['not run']} | {tot['equivalent']} | "
+                    f"**{100 * raw:.1f} %** | | |")
     lines = [*rows, ""]
+    if stale:
+        lines += ["Stale (the module's source or a selected test changed since its run: the row is the result as "
+                  "measured then, not in the total):", ""]
+        lines += [f"- {m}" for m in stale] + [""]
     if not_run:
-        lines += ["Not run (no result for the current source; their mutants are not in the total):", ""]
+        lines += ["Not run (no result; their mutants are not in the total):", ""]
         lines += [f"- {m}" for m in not_run] + [""]
     return "\n".join(lines)
 
