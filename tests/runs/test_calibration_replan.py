@@ -1,9 +1,9 @@
 """When the controller's model follows the calibration (twin.runs.estimators.RunEstimators.calibration_due).
 
-Oracle: the rule as the module and default_furnace.toml state it (threshold 0.03, interval 30 s, settled 0.5 %): re-plan only
-when the controller follows, the reference holds still and a parameter a plan takes is known to better than
-the threshold: the first time then, later only when it has moved by more than it since the plan; at most once
-per interval.
+Oracle: the rule as the module and default_furnace.toml state it (threshold 0.03, interval 30 s, settled 0.5 %):
+re-plan only when the controller follows, the reference holds still, the estimated mean has settled and a parameter
+a plan takes is known to better than the threshold: the first time then, later only when it has moved by more than
+it since the plan; at most once per interval.
 """
 
 from __future__ import annotations

@@ -262,7 +262,7 @@ class LiveChanges:
                     "calibration": f"calibration at t = {t:.1f} s",
                     "lamps": f"{self._lamps_change} from t = {t:.1f} s"}
             # a plan that models a lamp group's lost power: the integrator, which made up for it, starts at 0; a
-            # calibration alone keeps the goal: the integrator gives up what the new feedforward carries
+            # calibration alone keeps the goal: the integrator takes what the new plan's input lacks at the switch
             self._install(ctl, "; ".join(said.get(k, k) for k in kinds), fresh_integrator="lamps" in kinds,
                           carry_integrator=set(kinds) == {"calibration"})
             return t
@@ -280,7 +280,7 @@ class LiveChanges:
                  carry_integrator: bool = False) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
         models what the integrator was making up for: a lamp group's lost power (it starts at 0), or the
-        calibrated lamps (it gives up what the new feedforward carries)."""
+        calibrated lamps (it takes what the new plan's input lacks at the switch, so the input does not jump)."""
         motion_changed = ctl.oscillation != self.current.oscillation
         self.current = ctl
         self._host.adopt(ctl, motion_changed=motion_changed, fresh_integrator=fresh_integrator,
