@@ -11,7 +11,8 @@ within ``calibration.replan_settled`` of the reference (a re-plan 18 K above it,
 small furnace, cut the lamps for 3 s), and only while the reference holds still: during a heat-up the
 parameters cannot be told apart (lamp efficiency and emissivity correlate at -0.98 there, ``python
 scripts/observability.py``) and the truth's latent heat looks like weak lamps; a re-plan on such an estimate at
-108 s of the default oscillating campaign run drove the lamps to full power and overshot the reference by 33 K (3.0 % transient mean error instead of 1.3 %).
+108 s of the default oscillating campaign run drove the lamps to full power and overshot the reference by 33 K
+(3.0 % transient mean error instead of 1.3 %).
 The estimators learn their parameters only while the reference holds, too (before, the parameters are
 consider states: kept at their values, their uncertainty counted): learning during the heat-up moved the
 lamp efficiency to +12 % and then -36 % (truth: -10 %) and raised the default furnace's fixed transient mean
