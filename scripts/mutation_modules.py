@@ -8,8 +8,11 @@ A separate command (not part of CI: a module costs minutes to an hour on the sha
 
 Each module is run with mutmut (settings in ``[tool.mutmut]`` of pyproject.toml: the scope's modules and the
 fast tests that cover them) and its result stored in ``.mutation-cache/<module>.json`` with the SHA-256 of
-the module's source, the selected tests' sources and the mutmut settings: a module whose hash is unchanged
-is not run again; one whose code or tests changed is.
+the module's source, the sources of the test files that covered it in that run (mutmut's stats) and the mutmut
+settings other than the selection: a module whose hash is unchanged is not run again; one whose code or covering
+tests changed is.  A test added to the selection stales only the modules it was covering in their runs, so one
+more test file no longer stales every result (before stop 36 every selected test was in every fingerprint); a
+new test that would cover a module leaves its result a lower bound until it is run again (``--force``).
 
 The score counts every mutant of the module: ``raw = (killed + timeout) / mutants``.  A mutant the run
 never reached counts as not detected ("not run"), a module never run is listed as "not run".  There are no
@@ -83,11 +86,22 @@ def _mutmut_settings() -> dict[str, Any]:
     return tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["mutmut"]
 
 
-def fingerprint(module: str) -> str:
-    """SHA-256 of the module's source, the selected tests' sources and the mutmut settings."""
+SELECTION = "pytest_add_cli_args_test_selection"
+
+
+def fingerprint(module: str, tests: list[str] | None = None) -> str:
+    """SHA-256 of the module's source, the sources of ``tests`` (the test files that covered the module in its
+    run, :func:`covering_tests`) and the mutmut settings other than the selection itself.  ``tests=None``: the
+    rule before stop 36, every selected test's source and the whole settings (a result stored then stays current
+    under it until it is run again)."""
     settings = _mutmut_settings()
     h = hashlib.sha256(source_of(module).read_bytes())
-    for test in sorted(settings.get("pytest_add_cli_args_test_selection", [])):
+    if tests is None:
+        names = sorted(settings.get(SELECTION, []))
+    else:
+        names = sorted(tests)
+        settings = {k: v for k, v in settings.items() if k != SELECTION}
+    for test in names:
         path = ROOT / test.split("::")[0]
         h.update(test.encode())
         if path.is_file():
@@ -96,17 +110,86 @@ def fingerprint(module: str) -> str:
     return h.hexdigest()
 
 
+def covering_tests(module: str, stats: Path | None = None) -> list[str] | None:
+    """The test files that cover ``module``'s functions, from mutmut's stats of its last run (the tests mutmut runs
+    against each mutant); None if the stats do not know the module."""
+    stats = stats or ROOT / "mutants" / "mutmut-stats.json"
+    if not stats.is_file():
+        return None
+    by_function = json.loads(stats.read_text()).get("tests_by_mangled_function_name", {})
+    mine = [tests for name, tests in by_function.items() if name.startswith(f"{module}.x")]
+    if not mine:
+        return None
+    return sorted({t.split("::")[0] for tests in mine for t in tests})
+
+
 def _cache_file(module: str) -> Path:
     return CACHE / f"{module}.json"
 
 
 def cached(module: str) -> dict[str, Any] | None:
-    """The stored result of ``module`` if its fingerprint still matches."""
+    """The stored result of ``module`` if its fingerprint still matches: its source, the tests that covered it
+    and the settings unchanged.  A test file added to the selection that would cover it does not stale it: the
+    result is then a lower bound until the module is run again (``--force``)."""
     f = _cache_file(module)
     if not f.is_file():
         return None
     data = json.loads(f.read_text())
-    return data if data.get("fingerprint") == fingerprint(module) else None
+    return data if data.get("fingerprint") == fingerprint(module, data.get("tests")) else None
+
+
+def _git_show(commit: str, path: str) -> bytes | None:
+    done = subprocess.run(["git", "show", f"{commit}:{path}"], cwd=ROOT, capture_output=True, check=False)
+    return done.stdout if done.returncode == 0 else None
+
+
+def revalidate(module: str, commit: str) -> bool:
+    """A stale result made on ``commit`` under the rule before stop 36 that still holds: its old fingerprint is
+    the one computed from ``commit``'s files (so it was measured on them), the module's source is the same at
+    ``commit`` as in the tree, and every test file that covers it now (mutmut's stats) was selected whole at
+    ``commit`` and is the same.  Such a result gets the per-module fingerprint; True if it was rewritten."""
+    f = _cache_file(module)
+    if not f.is_file():
+        return False
+    data = json.loads(f.read_text())
+    if "tests" in data or cached(module) is not None:
+        return False
+    old_toml = _git_show(commit, "pyproject.toml")
+    src = _git_show(commit, str(source_of(module).relative_to(ROOT)))
+    if old_toml is None or src is None or src != source_of(module).read_bytes():
+        return False
+    settings = tomllib.loads(old_toml.decode())["tool"]["mutmut"]
+    h = hashlib.sha256(src)
+    for test in sorted(settings.get(SELECTION, [])):
+        h.update(test.encode())
+        h.update(_git_show(commit, test.split("::")[0]) or b"")
+    h.update(json.dumps(settings, sort_keys=True).encode())
+    tests = covering_tests(module)
+    if h.hexdigest() != data.get("fingerprint") or tests is None:
+        return False
+    selected_then = {t for t in settings.get(SELECTION, []) if "::" not in t}  # whole files selected on commit
+    if any(t not in selected_then or _git_show(commit, t) != (ROOT / t).read_bytes() for t in tests):
+        return False  # a covering test that was not run then (or differs): the result may be lower now
+    data.update(tests=tests, fingerprint=fingerprint(module, tests), revalidated=f"on {commit}")
+    f.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    return True
+
+
+def migrate(module: str) -> bool:
+    """A result stored under the rule before stop 36 (no ``tests``) that is still current under it gets its
+    covering tests (from mutmut's stats) and the per-module fingerprint; True if it was rewritten."""
+    f = _cache_file(module)
+    if not f.is_file():
+        return False
+    data = json.loads(f.read_text())
+    if "tests" in data or data.get("fingerprint") != fingerprint(module):
+        return False
+    tests = covering_tests(module)
+    if tests is None:
+        return False
+    data.update(tests=tests, fingerprint=fingerprint(module, tests))
+    f.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    return True
 
 
 def _results(module: str) -> dict[str, str]:
@@ -139,7 +222,9 @@ def run_module(module: str, *, children: int = 2) -> dict[str, Any]:
     done = subprocess.run(cmd, cwd=ROOT, env={**os.environ, "MPLBACKEND": "Agg", "OPENBLAS_NUM_THREADS": "1"},
                           check=False)
     results = _results(module)
-    data = {"module": module, "fingerprint": fingerprint(module), "date": started.isoformat(timespec="seconds"),
+    tests = covering_tests(module) or []
+    data = {"module": module, "tests": tests, "fingerprint": fingerprint(module, tests),
+            "date": started.isoformat(timespec="seconds"),
             "wall_s": round((dt.datetime.now(dt.UTC) - started).total_seconds()), "mutmut_exit": done.returncode,
             "results": results,
             "diffs": {n: _diff(n, module) for n, st in results.items() if st not in ("killed", "timeout")}}
@@ -174,13 +259,13 @@ NOTES = "\n## Notes"
 SUMMARY_HEAD = """# Mutation testing
 
 Written by `bash scripts/mutation.sh MODULE...` (`scripts/mutation_modules.py`; mutmut with the settings of
-`[tool.mutmut]` in pyproject.toml).  Each module's result is cached under the SHA-256 of its source, its
-selected tests and the settings, and listed here with its date and hash; a module whose code or tests changed
-since is marked "stale" (its row as measured then, not in the total) until it is run again.  Every mutant counts: raw score = (killed + timeout) / mutants; a
-mutant the run never reached is "not run" and counts as not detected.  A survivor is equivalent only when
-`scripts/mutation_equivalent.toml` names it (a `[mutant."name"]` entry) with a reason and a second look;
-the issue-17 regex rules are not applied.  The full report with every survivor's diff is an artifact
-(`test-artifacts/mutation-report.md`), not committed.
+`[tool.mutmut]` in pyproject.toml).  Each module's result is cached under the SHA-256 of its source, the test
+files that covered it in its run and the settings, and listed here with its date and hash; a module whose code or
+covering tests changed since is marked "stale" (its row as measured then, not in the total) until it is run again.
+Every mutant counts: raw score = (killed + timeout) / mutants; a mutant the run never reached is "not run" and
+counts as not detected.  A survivor is equivalent only when `scripts/mutation_equivalent.toml` names it (a
+`[mutant."name"]` entry) with a reason and a second look; the issue-17 regex rules are not applied.  The full
+report with every survivor's diff is an artifact (`test-artifacts/mutation-report.md`), not committed.
 
 """
 
@@ -249,12 +334,21 @@ def main() -> int:
     ap.add_argument("--all", action="store_true", help="every module of the scope")
     ap.add_argument("--force", action="store_true", help="run even if the cached result is current")
     ap.add_argument("--list", action="store_true", help="the scope, and which modules have a current result")
+    ap.add_argument("--revalidate", metavar="COMMIT", help="keep stale results made on COMMIT (the rule before "
+                    "stop 36) whose module and covering tests are unchanged since")
     ap.add_argument("--summary", type=Path, help="write the short summary table (markdown) here")
     ap.add_argument("--report", type=Path, help="write the full report (every survivor's diff) here")
     a = ap.parse_args()
     unknown = [m for m in a.modules if m not in SCOPE]
     if unknown:
         ap.error(f"not in the scope: {', '.join(unknown)} (see --list)")
+    for module in SCOPE if a.revalidate else []:
+        if revalidate(module, a.revalidate):
+            log.info("%s: result of %s kept (module and covering tests unchanged since)", module, a.revalidate)
+    for module in SCOPE:  # results stored under the old rule, still current under it: per-module fingerprints
+        if migrate(module):
+            log.info("%s: result kept, fingerprinted by the %d test files that covered it", module,
+                     len(json.loads(_cache_file(module).read_text())["tests"]))
     for module in (list(SCOPE) if a.all else a.modules):
         if not a.force and cached(module) is not None:
             log.info("%s: current result cached, not run", module)
