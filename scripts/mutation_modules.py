@@ -302,8 +302,9 @@ def summary(modules: list[str]) -> str:
                     f"**{100 * raw:.1f} %** | | |")
     lines = [*rows, ""]
     if stale:
-        lines += ["Stale (the module's source or a selected test changed since its run: the row is the result as "
-                  "measured then, not in the total):", ""]
+        lines += ["Stale (the module's source or a test that covered it changed since its run, or the result was "
+                  "made under the rule before stop 36 with other tests selected: the row is the result as measured "
+                  "then, not in the total):", ""]
         lines += [f"- {m}" for m in stale] + [""]
     if not_run:
         lines += ["Not run (no result; their mutants are not in the total):", ""]
