@@ -20,6 +20,10 @@ from twin.furnace.opcua.nodes import NodeMap, load_mapping
 from twin.furnace.opcua.options import OpcUaOptions
 from twin.furnace.simulated import SimulatedFurnace
 
+#: its tests run in real time (sleeps, a watchdog, late ticks): scripts/test.sh runs them after the parallel part,
+#: alone on the machine (a full parallel run on a slow day left 12 of 30 samples in time, against >= 20)
+pytestmark = pytest.mark.realtime
+
 CFG = small_config()
 GROUPS = [g.name for g in CFG.lamps.groups]
 
