@@ -280,7 +280,7 @@ class LiveChanges:
                  carry_integrator: bool = False) -> None:
         """Swap in a new plan at a sample boundary; the integrator state carries over, unless the plan now
         models what the integrator was making up for: a lamp group's lost power (it starts at 0), or the
-        calibrated lamps (it takes what the new plan's input lacks at the switch, so the input does not jump)."""
+        calibrated lamps (it takes what the new plan's input lacks at the switch: with the LQG no jump)."""
         motion_changed = ctl.oscillation != self.current.oscillation
         self.current = ctl
         self._host.adopt(ctl, motion_changed=motion_changed, fresh_integrator=fresh_integrator,
