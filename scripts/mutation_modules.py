@@ -37,6 +37,7 @@ import subprocess
 import sys
 import tomllib
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -82,30 +83,35 @@ def source_of(module: str) -> Path:
     return ROOT / (module.replace(".", "/") + ".py")
 
 
-def _mutmut_settings() -> dict[str, Any]:
-    return tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["mutmut"]
+def _read_tree(path: str) -> bytes | None:
+    """A file of the working tree (relative to the repository), None if there is none."""
+    f = ROOT / path
+    return f.read_bytes() if f.is_file() else None
+
+
+def _mutmut_settings(read: Callable[[str], bytes | None] = _read_tree) -> dict[str, Any]:
+    return tomllib.loads((read("pyproject.toml") or b"").decode())["tool"]["mutmut"]
 
 
 SELECTION = "pytest_add_cli_args_test_selection"
 
 
-def fingerprint(module: str, tests: list[str] | None = None) -> str:
+def fingerprint(module: str, tests: list[str] | None = None,
+                read: Callable[[str], bytes | None] = _read_tree) -> str:
     """SHA-256 of the module's source, the sources of ``tests`` (the test files that covered the module in its
     run, :func:`covering_tests`) and the mutmut settings other than the selection itself.  ``tests=None``: the
     rule before stop 36, every selected test's source and the whole settings (a result stored then stays current
-    under it until it is run again)."""
-    settings = _mutmut_settings()
-    h = hashlib.sha256(source_of(module).read_bytes())
+    under it until it is run again).  ``read`` gives a file's bytes (the tree's; :func:`revalidate`: a commit's)."""
+    settings = _mutmut_settings(read)
+    h = hashlib.sha256(read(str(source_of(module).relative_to(ROOT))) or b"")
     if tests is None:
         names = sorted(settings.get(SELECTION, []))
     else:
         names = sorted(tests)
         settings = {k: v for k, v in settings.items() if k != SELECTION}
     for test in names:
-        path = ROOT / test.split("::")[0]
         h.update(test.encode())
-        if path.is_file():
-            h.update(path.read_bytes())
+        h.update(read(test.split("::")[0]) or b"")
     h.update(json.dumps(settings, sort_keys=True).encode())
     return h.hexdigest()
 
@@ -143,6 +149,12 @@ def _git_show(commit: str, path: str) -> bytes | None:
     return done.stdout if done.returncode == 0 else None
 
 
+def _stamp(module: str, data: dict[str, Any], tests: list[str], **extra: str) -> None:
+    """Store ``data`` with the per-module fingerprint of its covering ``tests``."""
+    data.update(tests=tests, fingerprint=fingerprint(module, tests), **extra)
+    _cache_file(module).write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+
+
 def revalidate(module: str, commit: str) -> bool:
     """A stale result made on ``commit`` under the rule before stop 36 that still holds: its old fingerprint is
     the one computed from ``commit``'s files (so it was measured on them), the module's source is the same at
@@ -154,24 +166,20 @@ def revalidate(module: str, commit: str) -> bool:
     data = json.loads(f.read_text())
     if "tests" in data or cached(module) is not None:
         return False
-    old_toml = _git_show(commit, "pyproject.toml")
-    src = _git_show(commit, str(source_of(module).relative_to(ROOT)))
-    if old_toml is None or src is None or src != source_of(module).read_bytes():
+
+    def then(path: str) -> bytes | None:
+        return _git_show(commit, path)
+
+    src = str(source_of(module).relative_to(ROOT))
+    if then("pyproject.toml") is None or then(src) is None or then(src) != _read_tree(src):
         return False
-    settings = tomllib.loads(old_toml.decode())["tool"]["mutmut"]
-    h = hashlib.sha256(src)
-    for test in sorted(settings.get(SELECTION, [])):
-        h.update(test.encode())
-        h.update(_git_show(commit, test.split("::")[0]) or b"")
-    h.update(json.dumps(settings, sort_keys=True).encode())
     tests = covering_tests(module)
-    if h.hexdigest() != data.get("fingerprint") or tests is None:
+    if fingerprint(module, read=then) != data.get("fingerprint") or tests is None:
         return False
-    selected_then = {t for t in settings.get(SELECTION, []) if "::" not in t}  # whole files selected on commit
-    if any(t not in selected_then or _git_show(commit, t) != (ROOT / t).read_bytes() for t in tests):
+    selected_then = {t for t in _mutmut_settings(then).get(SELECTION, []) if "::" not in t}  # whole files
+    if any(t not in selected_then or then(t) != _read_tree(t) for t in tests):
         return False  # a covering test that was not run then (or differs): the result may be lower now
-    data.update(tests=tests, fingerprint=fingerprint(module, tests), revalidated=f"on {commit}")
-    f.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    _stamp(module, data, tests, revalidated=f"on {commit}")
     return True
 
 
@@ -187,8 +195,7 @@ def migrate(module: str) -> bool:
     tests = covering_tests(module)
     if tests is None:
         return False
-    data.update(tests=tests, fingerprint=fingerprint(module, tests))
-    f.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    _stamp(module, data, tests)
     return True
 
 
@@ -281,14 +288,14 @@ def summary(modules: list[str]) -> str:
     not_run, stale = [], []
     for module in modules:
         data = cached(module)
-        if data is None and _cache_file(module).is_file():  # measured on other code or tests: shown, marked
+        current = data is not None
+        if not current and _cache_file(module).is_file():  # measured on other code or tests: shown, marked
             data = json.loads(_cache_file(module).read_text())
             stale.append(module)
         if data is None:
             not_run.append(module)
             continue
         k = counts(data, eq)
-        current = module not in stale
         if current:
             for key in ("mutants", "killed", "timeout", "survived", "no tests", "not run", "equivalent"):
                 tot[key] += k[key]

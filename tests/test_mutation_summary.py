@@ -114,6 +114,10 @@ def test_revalidate_keeps_only_what_was_measured_with_the_same_module_and_coveri
     stats(["tests/test_b.py::test_2"])  # covered now by a test that was not selected then
     assert not attempt()
     stats(["tests/test_a.py::test_1"])
+    measured_elsewhere = stored
+    stored = {**stored, "fingerprint": "0" * 64}  # not measured on this commit's files
+    assert not attempt()
+    stored = measured_elsewhere
     assert attempt() and mm.cached(module) is not None
     (tmp_path / "tests" / "test_a.py").write_text("def test_1():\n    assert 1 == 1\n")  # the covering test differs
     assert not attempt()
