@@ -108,18 +108,60 @@ registerFigure("power-plot", () => powerFigure(state.series || emptySeries()));
 registerFigure("tc-plot", () => tcFigure(state.series || emptySeries()));
 registerFigure("inh-plot", () => inhFigure(state.series || emptySeries()));
 
+function draw(id) {
+  const el = document.getElementById(id);
+  if (!el) return;
+  const fig = FIGURES.get(id)();
+  if (!fig) return;
+  fig.layout.datarevision = revision;
+  window.Plotly.react(el, fig.data, fig.layout, CONFIG);
+}
+
+// All charts at once (a run shown, a view opened): the page must not keep the previous run's charts.
 export function render() {
   if (!state.furnace || state.view !== "live") return;
   revision += 1;
-  for (const [id, figure] of FIGURES) {
-    const el = document.getElementById(id);
-    if (!el) continue;
-    const fig = figure();
-    if (!fig) continue;
-    fig.layout.datarevision = revision;
-    window.Plotly.react(el, fig.data, fig.layout, CONFIG);
-  }
+  for (const id of FIGURES.keys()) draw(id);
   state.dirty = false;
 }
 
-export function startRendering() { setInterval(() => { if (state.dirty) render(); }, RENDER_MS); }
+// While a run streams, the charts are redrawn one per task, so that a click or a key between two charts is
+// answered at once, and a whole pass is followed by a pause of at least (1 / BUSY_SHARE - 1) times what it cost:
+// on a slow machine (or a software-rendered browser) the charts take at most about BUSY_SHARE of the page's
+// main thread.  Redrawing all of them every RENDER_MS had kept it 90 % busy on a loaded 2-core machine (small
+// furnace, speed 2): typing a new setpoint took 3 s.
+export const BUSY_SHARE = 0.25;
+let timer = null, drawing = false;
+
+function schedule(ms) { clearTimeout(timer); timer = setTimeout(pass, ms); }
+
+function pass() {
+  timer = null;
+  if (!state.dirty || !state.furnace || state.view !== "live") { schedule(RENDER_MS); return; }
+  // "drawing" until the pass is done (still truthy: the charts are not yet all drawn); a frame arriving during
+  // the pass sets it true again, and the next pass draws it
+  state.dirty = "drawing";
+  drawing = true;
+  revision += 1;
+  const ids = [...FIGURES.keys()];
+  let spent = 0;
+  const next = (i) => {
+    if (i < ids.length && state.view === "live") {
+      const t0 = performance.now();
+      draw(ids[i]);
+      spent += performance.now() - t0;
+      setTimeout(() => next(i + 1), 0);
+      return;
+    }
+    drawing = false;
+    if (state.dirty === "drawing") state.dirty = false;
+    // the pause only while frames stream in: a run's last frame is drawn at once (renderSoon)
+    schedule(state.ws ? Math.max(RENDER_MS, spent * (1 / BUSY_SHARE - 1)) : RENDER_MS);
+  };
+  next(0);
+}
+
+// The stream ended (or the run did): draw what is there now, not after the pause.
+export function renderSoon() { if (!drawing) schedule(0); }
+
+export function startRendering() { schedule(RENDER_MS); }

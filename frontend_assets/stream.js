@@ -3,6 +3,7 @@
 import { token } from "./api.js";
 import { addEvents, noteStatus } from "./events.js";
 import { $, badge, fmt, LIVE } from "./page.js";
+import { renderSoon } from "./charts.js";
 import { pushFrame } from "./series.js";
 import { state } from "./state.js";
 
@@ -17,8 +18,10 @@ export function applyFrame(f) {
   $("run-clock").textContent = `t = ${fmt(f.t)} s${f.late_samples ? ` · ${f.late_samples} late` : ""}`;
   addEvents(f.event_log);
   if (f.status && f.status !== (state.run && state.run.status)) badge(f.status);
-  if (f.status && !LIVE.includes(f.status) && f.status !== "degraded") noteStatus(f.status, f.t); // degraded: blind, going
+  const ended = f.status && !LIVE.includes(f.status) && f.status !== "degraded"; // degraded: blind, going
+  if (ended) noteStatus(f.status, f.t);
   state.dirty = true;
+  if (ended) renderSoon(); // the run's last frame: drawn at once, not after the charts' pause
 }
 
 // onEnd() is called when the server closes the stream (the run ended or the server went away).  Returns a
@@ -41,6 +44,6 @@ export function connectStream(runId, onEnd) {
     ws.onerror = resolve;
     setTimeout(resolve, 5000);
   });
-  ws.onclose = () => { if (state.ws === ws) { state.ws = null; onEnd(); } };
+  ws.onclose = () => { if (state.ws === ws) { state.ws = null; renderSoon(); onEnd(); } };
   return opened;
 }
