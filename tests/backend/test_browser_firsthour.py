@@ -125,7 +125,7 @@ def test_the_events_tell_what_happened_with_a_severity_filter(server, browser, a
     groups only for a spell that mattered, in plain words); the filter narrows it; the report lists every
     change and warning."""
     page, errors = open_dashboard(browser, server.url, 1400, 900)
-    run_id = _start(page, 800.0, 20.0, 120.0, "2")
+    run_id = _start(page, 800.0, 20.0, 120.0, "5")
     page.wait_for_function("state.run && state.run.status === 'running' && !document.getElementById('ref-btn')"
                            ".disabled", timeout=180_000)
     page.check("input[name=live-refmode][value=transition]")
