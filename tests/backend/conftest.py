@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from backend.runs.factory import LoopFactory
+from benchmarks.dashboard import CHROMIUM, CHROMIUM_ARGS  # Debian's chromium, headless flags: shared with the benchmark
 from twin.physics.grid import cell_centers
 from twin.runs.outage import run_ending
 from twin.runs.record import RunHeader, RunRecord, Snapshot  # the real types: the stand-in differs only in physics
@@ -198,10 +199,6 @@ def isolated_home(tmp_path, monkeypatch) -> Path:
         monkeypatch.setenv(var, str(home / var.lower()))
     return home
 
-
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--no-first-run"]
 
 
 @pytest.fixture(scope="module")
