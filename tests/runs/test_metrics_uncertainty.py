@@ -126,3 +126,106 @@ def test_windows_as_json() -> None:
     points = windows_from(120.0, 1100.0, [(10.0, "reference", {"points": [[5.0, 900.0], [25.0, 950.0]]})])
     assert points.to_json() == {"t0": 10.0, "t_E": 25.0, "setpoint": 950.0, "transient": [10.0, 35.0],
                                 "steady": [47.5, 60.0]}
+
+
+# ----------------------------------------------------------------------------------------- the extras
+def test_lamps_off_lead_is_the_largest_lead_over_the_common_samples() -> None:
+    from twin.runs.metrics import lamps_off_lead
+
+    free, ref = np.array([300.0, 303.0, 306.0]), np.array([298.0, 299.0, 310.0])
+    assert lamps_off_lead(free, ref, 1000.0) == pytest.approx(0.004)  # 303 - 299 K of 1000 K
+    assert lamps_off_lead(free, ref[:2], 500.0) == pytest.approx(0.008)  # only the common samples
+    assert lamps_off_lead(free[:1], ref, 1000.0) == pytest.approx(0.002)
+    assert lamps_off_lead(ref - 5.0, ref, 1000.0) == 0.0  # always behind: no lead, never negative
+    assert lamps_off_lead(np.zeros(0), ref, 1000.0) == 0.0
+
+
+def _changes(ts: dict, *changes: tuple[float, str, str]) -> dict:
+    ts["change_t"] = np.array([c[0] for c in changes], float)
+    ts["change_kind"] = np.array([c[1] for c in changes])
+    ts["change_json"] = np.array([c[2] for c in changes])
+    return ts
+
+
+def test_the_lamps_off_lead_counts_only_before_the_first_live_change() -> None:
+    """The lamps-off run is the furnace left alone from the start with the *starting* reference: after a live change
+    its comparison means nothing.  Lead 8 K at 2 s, 30 K at 6 s (after an oscillation switch at 5 s)."""
+    ts = _series()
+    free = ts["T_ref"].copy()
+    free[20] += 8.0
+    free[60] += 30.0
+    ts["true_mean_lamps_off"] = free
+    assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(30.0 / 1100.0)
+    _changes(ts, (5.0, "oscillation", '{"enabled": true}'), (12.0, "oscillation", '{"enabled": false}'))
+    assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(8.0 / 1100.0)
+    free[50] += 20.0  # at t = 5.0 s, the change's own sample: already after it
+    assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(8.0 / 1100.0)
+
+
+def test_full_power_steady_max_is_the_largest_share_of_one_group() -> None:
+    """Three groups over the steady window (51 samples): G1 at full power in 10, G2 in 20 (at exactly 0.999, which
+    counts), G3 at 0.998 throughout (does not).  Outside the window every group is at full power."""
+    ts = _series()
+    n_t = len(ts["t"])
+    st = np.flatnonzero(window(ts["t"], 10.0, "steady"))
+    u = np.ones((n_t, 3))
+    u[st] = [0.5, 0.5, 0.998]
+    u[st[:10], 0] = 1.0
+    u[st[-20:], 1] = 0.999
+    ts["u"] = u
+    assert compute_metrics(ts)["full_power_steady_max"] == pytest.approx(20 / 51)
+
+
+def test_the_calibration_is_the_last_sample_of_each_parameter_estimated() -> None:
+    ts = _series()
+    n_t = len(ts["t"])
+    p = np.linspace(0.0, 1.0, n_t)[:, None] * np.array([[-0.1, 0.05, np.nan]])
+    ts["parameters"], ts["parameter_sigma"] = p, np.abs(p) / 10.0 + np.array([0.01, 0.02, 0.03])
+    cal = compute_metrics(ts)["calibration"]
+    assert cal == {"lamp_efficiency": {"value": pytest.approx(-0.1), "sigma": pytest.approx(0.02)},
+                   "emissivity": {"value": pytest.approx(0.05), "sigma": pytest.approx(0.025)}}  # convection: NaN
+
+
+def test_the_shadow_is_measured_on_its_own_outputs_without_the_calibration() -> None:
+    ts = _series()
+    ts["parameters"], ts["parameter_sigma"] = np.zeros((len(ts["t"]), 3)), np.full((len(ts["t"]), 3), 0.01)
+    for k in ("T_mean_hat", "tc_hat", "field_hat"):
+        ts[f"shadow_{k}"] = ts[k].copy()
+    ts["shadow_T_mean_hat"] = ts["shadow_T_mean_hat"] + 11.0  # 1 % everywhere
+    m = compute_metrics(ts)
+    assert m["mean_error_steady_max"] == pytest.approx(0.0)
+    assert m["shadow"]["mean_error_steady_max"] == pytest.approx(0.01)
+    assert "calibration" in m and "calibration" not in m["shadow"] and "shadow" not in m["shadow"]
+
+
+def test_the_signed_tc4_error_of_an_oscillating_run_keeps_its_sign() -> None:
+    """TC4 reads 1 K sin(2 pi t / 4 s) below the reference and its estimate 2 K above: the error's amplitude is
+    3 K (their sum would oscillate by 1 K)."""
+    import json
+
+    ts = _series()
+    ts["eta"] = 0.01 * np.sin(2 * np.pi * ts["t"] / 4.0)
+    ts["scenario"] = json.dumps({"oscillation": {"enabled": True, "period": 4.0}})
+    ts["tc"][:, 3] -= 1.0 * np.sin(2 * np.pi * ts["t"] / 4.0)
+    ts["tc_hat"][:, 3] += 2.0 * np.sin(2 * np.pi * ts["t"] / 4.0)
+    assert compute_metrics(ts)["tc4_error_oscillation_amplitude"] == pytest.approx(3.0 / 1100.0, rel=1e-3)
+    ts["scenario"] = json.dumps({"oscillation": {"enabled": False, "period": 4.0}})
+    assert "tc4_error_oscillation_amplitude" not in compute_metrics(ts)
+
+
+def test_the_field_windows_move_with_a_live_reference_change() -> None:
+    """A reference change at 10 s to 1000 K with t_E = 10 s: the windows are 10-20 s and 25-30 s and the errors
+    are relative to 1000 K.  A hot spot of 50 K at 22 s (between them) is not counted, one of 20 K at 27 s is."""
+    ts = _series(n_t=301, t_end=30.0)
+    t = ts["t"]
+    ts["T_ref"] = np.where(t < 10.0, ts["T_ref"], 1000.0)
+    ts["T_mean_hat"] = ts["T_ref"].copy()
+    ts["field_hat"] = np.broadcast_to(ts["T_ref"][:, None, None], ts["field_hat"].shape).copy()
+    ts["field_true"] = ts["field_hat"].copy()
+    ts["tc"] = ts["tc_hat"] = np.repeat(ts["T_ref"][:, None], 4, 1)
+    _changes(ts, (10.0, "reference", '{"setpoint": 1000.0, "t_E": 10.0}'))
+    ts["field_hat"][220, 8, 13] += 50.0
+    ts["field_hat"][270, 8, 13] += 20.0
+    m = compute_metrics(ts)
+    assert m["field_estimation_error_steady_max"] == pytest.approx(0.02)
+    assert m["inhomogeneity_transient_max"] == pytest.approx(0.0)
