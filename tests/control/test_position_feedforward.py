@@ -1,9 +1,10 @@
 """The oscillating specimen's position fed forward (twin/control/position_feedforward.py, issue 26).
 
 Oracles: the defining equation of the correction (the position-aware model's fillet-mean rate equals the
-averaged model's) solved here by bisection, not by the module's formula; the input matrix against finite
-differences of the model's rhs; and, in closed loop against the simulated furnace's own truth (its own
-ray-traced table, not the twin's), the true fillet mean's ripple at the oscillation's period, fitted here.
+averaged model's) solved here by bisection, not by the module's formula (the input matrix it uses is checked
+against finite differences of the model's rhs in tests/model/test_parametric.py); and, in closed loop against
+the simulated furnace's own truth (its own ray-traced table, not the twin's), the true fillet mean's ripple at
+the oscillation's period, fitted here.
 """
 
 from __future__ import annotations
@@ -49,22 +50,6 @@ def test_the_scale_is_bounded():
     v = scaled_inputs(u, b, 5.0)
     np.testing.assert_allclose(v, u * (1 + MAX_SCALE))
     np.testing.assert_array_equal(scaled_inputs(np.zeros(2), b, 1.0), np.zeros(2))  # lamps off: nothing to scale
-
-
-def test_input_matrix_against_finite_differences(tables):
-    """d f / d u of the aware model at a position between two table nodes, with calibrated parameters."""
-    from twin.model.parametric import ParametricModel
-
-    model = ParametricModel(tables, OSC, motion="position_aware", calibrated=("lamp_efficiency", "emissivity"))
-    p = Parameters(lamp_efficiency=-0.12, emissivity=0.05)
-    theta, u = np.linspace(700.0, 900.0, tables.n), np.full(tables.m, 0.4)
-    eta = 0.3 * OSC.amplitude
-    B = model.input_matrix(eta, p)
-    f0 = model.rhs(theta, u, eta, p)
-    for i in range(tables.m):
-        du = np.zeros(tables.m)
-        du[i] = 0.1
-        np.testing.assert_allclose((model.rhs(theta, u + du, eta, p) - f0) / 0.1, B[:, i], rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("capacity", ["constant", "temperature"])
