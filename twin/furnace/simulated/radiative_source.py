@@ -97,11 +97,6 @@ class PlantRadiation:
         """The lamps' part P2(eta) u_lamp (N_s,) W/m^2 (negative: absorbed) for fractions v."""
         return self._blend(self.P2_lamps if per_lamp else self.P2_groups, v, eta)
 
-    def wall_flux(self, eta: float) -> Array:
-        """The walls' part of P1(eta) [0; T_w^4] (N_s,) W/m^2."""
-        k, w = hat_interval(self._eta_list, eta)
-        return (1.0 - w) * self.q_wall[k] + (w * self.q_wall[k + 1] if w > 0.0 else 0.0)
-
     def matrices(self, weights: ArrayLike) -> tuple[Array, Array, Array]:
         """Weighted P1 specimen block (N, N), wall flux (N,), P2 per group fraction (N, 6), float64.
 
