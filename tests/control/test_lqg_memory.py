@@ -97,3 +97,27 @@ def test_the_cost_to_go_is_kept_at_multiples_only_and_asked_of_a_full_design(des
     no_terminal = Gains(gains.K, gains.K_terminal, gains.P_terminal, EVERY, 0.0, gains.Phi, gains.Gamma, gains.P)
     with pytest.raises(ValueError, match="without their linearisation"):
         no_terminal.linearisation(0)
+
+
+def test_the_design_asks_its_budget_every_check_every_samples_and_stops_when_told(design) -> None:
+    """``check`` is called at j = 100, 50, 0 of a 120-sample design (every CHECK_EVERY = 50, counted backwards) and
+    whatever it raises ends the design (a cancelled or spent plan budget)."""
+    from twin.control.lqg import CHECK_EVERY
+
+    cfg, model, plan, _ = design
+    n = 120
+    long = FeedforwardPlan(t=np.arange(n + 1) * model.t_s, u_ff=np.tile(plan.u_ff[0], (n, 1)),
+                           theta_ref=np.tile(plan.theta_ref[0], (n + 1, 1)), T_ref=np.full(n + 1, 800.0),
+                           T_mean=np.full(n + 1, 800.0), status="test", iterations=0, solve_s=0.0, success=True)
+    calls: list[int] = []
+    lqg_gains(model, long, cfg, check=lambda: calls.append(1))
+    assert CHECK_EVERY == 50 and len(calls) == 3
+
+    class Spent(Exception):
+        pass
+
+    def spent() -> None:
+        raise Spent
+
+    with pytest.raises(Spent):
+        lqg_gains(model, long, cfg, check=spent)
