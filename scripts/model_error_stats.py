@@ -9,7 +9,12 @@ already in ``--runs`` is reused) and prints the one-step defect's fitted q0, q1 
 (:mod:`twin.experiments.model_error_stats`) and, for each ``--scales`` factor on q0 (with the furnace file's TC
 tolerance, ``[ekf.model_error] tc_tolerance_*``), the coverage, NEES and NIS of the runs replayed with it.
 ``check`` prints the metrics of the runs replayed with the furnace file's ``[ekf.model_error]`` as a Markdown
-table (``docs/uncertainty.md``).
+table (``docs/uncertainty.md``).  ``scale`` prints, for each ``--scales`` factor k on the runs' stored sigma, each
+run's steady coverage, the pooled one and how many runs are in 90-99 %, with the error's split into one offset per
+run and the rest (:func:`twin.experiments.model_error_stats.coverage_by_scale`):
+
+    python scripts/model_error_stats.py scale --config default --oscillate --seeds 0 1 2 3 4 \
+        --scales 0.6 0.8 0.9 1 1.1 1.25 --runs /tmp/me-runs
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     from twin.estimation.choice import estimator_model
     from twin.experiments.model_error_stats import (
         bias_statistics,
+        coverage_by_scale,
         model_error_statistics,
         replay_metrics,
         replay_variants,
@@ -55,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     from twin.scenario import EstimatorChoice, Scenario
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=("measure", "check"))
+    ap.add_argument("what", choices=("measure", "check", "scale"))
     ap.add_argument("--config", default="default")
     ap.add_argument("--oscillate", action="store_true")
     ap.add_argument("--seeds", type=int, nargs="+", required=True)
@@ -74,6 +80,18 @@ def main(argv: list[str] | None = None) -> int:
     refs = [tuple(float(v) for v in r.split(":")) for r in args.references]
     paths = [run_once(cfg, args.config, args.oscillate, s, sp, tE, args.runs) for s in args.seeds for sp, tE in refs]
     runs = [load_arrays(p) for p in paths]
+    if args.what == "scale":
+        out = coverage_by_scale(runs, args.scales)
+        lines = [f"run means {', '.join(f'{a:+.2f}' for a in out['run_mean'])} K; within-run sd "
+                 f"{', '.join(f'{s:.2f}' for s in out['within_sd'])} K; rho = {out['rho']:.2f}; runs in 90-99 % "
+                 f"with an exact sigma for such an error: {100 * out['perfect_in_band']:.0f} %", "",
+                 "| k | " + " | ".join(f"seed {s}" for s in args.seeds) + " | pooled | runs in 90-99 % | transient, min |",
+                 "|---" * (len(args.seeds) + 4) + "|"]
+        for r in out["rows"]:
+            lines.append(f"| {r['k']:g} | " + " | ".join(f"{100 * c:.1f}" for c in r["steady"])
+                         + f" | {100 * r['pooled']:.1f} | {r['in_band']} of {len(runs)} | {100 * r['transient_min']:.1f} |")
+        sys.stdout.write("\n".join(lines) + "\n")
+        return 0
     tables = model_tables(cfg, radiation_model(cfg))
     if args.what == "measure":
         def model_for(ts: Any) -> Any:
