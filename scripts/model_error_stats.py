@@ -85,11 +85,13 @@ def main(argv: list[str] | None = None) -> int:
         lines = [f"run means {', '.join(f'{a:+.2f}' for a in out['run_mean'])} K; within-run sd "
                  f"{', '.join(f'{s:.2f}' for s in out['within_sd'])} K; rho = {out['rho']:.2f}; runs in 90-99 % "
                  f"with an exact sigma for such an error: {100 * out['perfect_in_band']:.0f} %", "",
-                 "| k | " + " | ".join(f"seed {s}" for s in args.seeds) + " | pooled | runs in 90-99 % | transient, min |",
+                 "| k | " + " | ".join(f"seed {s}" for s in args.seeds)
+                 + " | pooled | runs in 90-99 % | transient, min |",
                  "|---" * (len(args.seeds) + 4) + "|"]
         for r in out["rows"]:
             lines.append(f"| {r['k']:g} | " + " | ".join(f"{100 * c:.1f}" for c in r["steady"])
-                         + f" | {100 * r['pooled']:.1f} | {r['in_band']} of {len(runs)} | {100 * r['transient_min']:.1f} |")
+                         + f" | {100 * r['pooled']:.1f} | {r['in_band']} of {len(runs)} "
+                         f"| {100 * r['transient_min']:.1f} |")
         sys.stdout.write("\n".join(lines) + "\n")
         return 0
     tables = model_tables(cfg, radiation_model(cfg))

@@ -233,15 +233,16 @@ def coverage_by_scale(runs: Sequence[Mapping[str, Any]], scales: Sequence[float]
     fully, those with a large offset hardly).  Uses each run's stored ``field_sigma``."""
     from twin.runs.metrics import window
 
-    steady, transient = [], []
+    steady: list[tuple[Array, Array]] = []
+    transient: list[tuple[Array, Array]] = []
     for ts in runs:
         fil = Fillet.on_grid(np.asarray(ts["x"]), np.asarray(ts["y"]), float(ts["L_s"]), float(ts["W_s"]))
         tf = np.asarray(ts["t_field"], float)
         err = (np.asarray(ts["field_hat"], float) - np.asarray(ts["field_true"], float))[..., fil.mask]
         sig = np.asarray(ts["field_sigma"], float)[..., fil.mask]
-        for out, which in ((steady, "steady"), (transient, "transient")):
-            w = window(tf, float(ts["t_E"]), which)
-            out.append((err[w], sig[w]))
+        w_st, w_tr = window(tf, float(ts["t_E"]), "steady"), window(tf, float(ts["t_E"]), "transient")
+        steady.append((err[w_st], sig[w_st]))
+        transient.append((err[w_tr], sig[w_tr]))
     means = np.array([float(e.mean()) for e, _ in steady])
     within = np.array([float(e.std()) for e, _ in steady])
     rho = float(np.sqrt(np.mean(means**2) / (np.mean(means**2) + np.mean(within**2))))
