@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tests.runs.test_metrics import _series
+from twin.events import RunChange, change_arrays
 from twin.physics.fillet import Fillet
 from twin.runs.metrics import Windows, compute_metrics, late_samples, run_metrics, window, windows_from
 from twin.runs.record import TC_STATUS_CODES
@@ -140,13 +141,6 @@ def test_lamps_off_lead_is_the_largest_lead_over_the_common_samples() -> None:
     assert lamps_off_lead(np.zeros(0), ref, 1000.0) == 0.0
 
 
-def _changes(ts: dict, *changes: tuple[float, str, str]) -> dict:
-    ts["change_t"] = np.array([c[0] for c in changes], float)
-    ts["change_kind"] = np.array([c[1] for c in changes])
-    ts["change_json"] = np.array([c[2] for c in changes])
-    return ts
-
-
 def test_the_lamps_off_lead_counts_only_before_the_first_live_change() -> None:
     """The lamps-off run is the furnace left alone from the start with the *starting* reference: after a live change
     its comparison means nothing.  Lead 8 K at 2 s, 30 K at 6 s (after an oscillation switch at 5 s)."""
@@ -156,7 +150,8 @@ def test_the_lamps_off_lead_counts_only_before_the_first_live_change() -> None:
     free[60] += 30.0
     ts["true_mean_lamps_off"] = free
     assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(30.0 / 1100.0)
-    _changes(ts, (5.0, "oscillation", '{"enabled": true}'), (12.0, "oscillation", '{"enabled": false}'))
+    ts.update(change_arrays([RunChange(5.0, "oscillation", {"enabled": True}),
+                             RunChange(12.0, "oscillation", {"enabled": False})]))
     assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(8.0 / 1100.0)
     free[50] += 20.0  # at t = 5.0 s, the change's own sample: already after it
     assert compute_metrics(ts)["true_mean_lead_lamps_off_max"] == pytest.approx(8.0 / 1100.0)
@@ -186,18 +181,6 @@ def test_the_calibration_is_the_last_sample_of_each_parameter_estimated() -> Non
                    "emissivity": {"value": pytest.approx(0.05), "sigma": pytest.approx(0.025)}}  # convection: NaN
 
 
-def test_the_shadow_is_measured_on_its_own_outputs_without_the_calibration() -> None:
-    ts = _series()
-    ts["parameters"], ts["parameter_sigma"] = np.zeros((len(ts["t"]), 3)), np.full((len(ts["t"]), 3), 0.01)
-    for k in ("T_mean_hat", "tc_hat", "field_hat"):
-        ts[f"shadow_{k}"] = ts[k].copy()
-    ts["shadow_T_mean_hat"] = ts["shadow_T_mean_hat"] + 11.0  # 1 % everywhere
-    m = compute_metrics(ts)
-    assert m["mean_error_steady_max"] == pytest.approx(0.0)
-    assert m["shadow"]["mean_error_steady_max"] == pytest.approx(0.01)
-    assert "calibration" in m and "calibration" not in m["shadow"] and "shadow" not in m["shadow"]
-
-
 def test_the_signed_tc4_error_of_an_oscillating_run_keeps_its_sign() -> None:
     """TC4 reads 1 K sin(2 pi t / 4 s) below the reference and its estimate 2 K above: the error's amplitude is
     3 K (their sum would oscillate by 1 K)."""
@@ -223,7 +206,7 @@ def test_the_field_windows_move_with_a_live_reference_change() -> None:
     ts["field_hat"] = np.broadcast_to(ts["T_ref"][:, None, None], ts["field_hat"].shape).copy()
     ts["field_true"] = ts["field_hat"].copy()
     ts["tc"] = ts["tc_hat"] = np.repeat(ts["T_ref"][:, None], 4, 1)
-    _changes(ts, (10.0, "reference", '{"setpoint": 1000.0, "t_E": 10.0}'))
+    ts.update(change_arrays([RunChange(10.0, "reference", {"setpoint": 1000.0, "t_E": 10.0})]))
     ts["field_hat"][220, 8, 13] += 50.0
     ts["field_hat"][270, 8, 13] += 20.0
     m = compute_metrics(ts)

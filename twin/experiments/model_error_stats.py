@@ -246,10 +246,10 @@ def coverage_by_scale(runs: Sequence[Mapping[str, Any]], scales: Sequence[float]
     means = np.array([float(e.mean()) for e, _ in steady])
     within = np.array([float(e.std()) for e, _ in steady])
     rho = float(np.sqrt(np.mean(means**2) / (np.mean(means**2) + np.mean(within**2))))
+    n_cells = [e.size for e, _ in steady]
     rows = []
     for k in scales:
         cov = [float(np.mean(np.abs(e) <= 2.0 * k * s)) for e, s in steady]
-        n_cells = [e.size for e, _ in steady]
         rows.append({"k": float(k), "steady": cov,
                      "pooled": float(np.dot(cov, n_cells) / np.sum(n_cells)),
                      "in_band": sum(band[0] <= c <= band[1] for c in cov),
