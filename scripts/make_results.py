@@ -28,13 +28,16 @@ A campaign on the default furnace (``furnace-twin campaign --out DIR``, about 35
 same way (``--store default DIR COMMAND``).  The README's headline table is made here too, from
 ``docs/data/campaign-default.json``: the range over the seeds of each metric, fixed and oscillating, beside the
 paper's bounds; it sits between the README's ``<!-- results:campaign-default -->`` markers, and
-``tests/test_readme.py`` checks it against the JSON's seeds.
+``tests/test_readme.py`` checks it against the JSON's seeds.  So is the README's coverage table (between
+``<!-- results:coverage -->`` markers): the reported band's share of the true field per stored campaign
+(``COVERAGE_FURNACES``) and specimen mode, the mean over the seeds beside each seed's (issue 25).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import subprocess
 import sys
@@ -182,12 +185,50 @@ def readme_table(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+#: the README's coverage table (issue 25): the stored campaigns it is made from, in its order
+COVERAGE_FURNACES = ("default", "banded")
+COVERAGE_BEGIN, COVERAGE_END = "<!-- results:coverage -->", "<!-- /results:coverage -->"
+
+
+def coverage_readme_table() -> str:
+    """The README's table of the reported band's truth: per stored campaign and specimen mode, the steady window's
+    2-sigma coverage of the true field (mean over the seeds, each seed's) and the smallest transient, from the
+    first experiment of the mode (the TC4 places of one mode share their loop, so their coverages are the same)."""
+    from twin.experiments.campaign import COVERAGE_BAND, COVERAGE_TRANSIENT_MIN
+
+    lo, hi = COVERAGE_BAND
+    lines = [f"| furnace, specimen | steady: mean over the seeds ({100 * lo:g}-{100 * hi:g} %) | each seed | "
+             f"transient, smallest (>= {100 * COVERAGE_TRANSIENT_MIN:g} %) |", "|---|---|---|---|"]
+    for name in COVERAGE_FURNACES:
+        path = DATA / f"campaign-{name}.json"
+        if not path.is_file():
+            continue
+        for oscillating, mode in ((False, "fixed"), (True, "oscillating")):
+            exp = [e for e in load(path)["campaign"]["experiments"] if bool(e["oscillation"]) == oscillating]
+            if not exp:
+                continue
+            steady, transient = ([float(v) for s in exp[0]["seeds"]
+                                  if isinstance(v := s["metrics"].get(key), int | float) and math.isfinite(v)]
+                                 for key in ("coverage_2sigma_steady", "coverage_2sigma_transient"))
+            if not steady or not transient:
+                continue  # a campaign without a true field, or stored before the reported covariance
+            lines.append(f"| `{name}`, {mode} | {100 * sum(steady) / len(steady):.1f} % | "
+                         + ", ".join(f"{100 * v:.1f}" for v in steady) + f" | {100 * min(transient):.1f} % |")
+    return "\n".join(lines)
+
+
 def readme_with_table(readme: str) -> str:
-    """The README with its headline table made again from ``docs/data/campaign-default.json``."""
+    """The README with its headline table made again from ``docs/data/campaign-default.json`` (and its coverage
+    table, when it has the markers, from the stored campaigns of ``COVERAGE_FURNACES``)."""
     head, rest = readme.split(README_BEGIN, 1)
     _, tail = rest.split(README_END, 1)
     table = readme_table(load(DATA / "campaign-default.json"))
-    return f"{head}{README_BEGIN}\n{table}\n{README_END}{tail}"
+    readme = f"{head}{README_BEGIN}\n{table}\n{README_END}{tail}"
+    if COVERAGE_BEGIN in readme:
+        head, rest = readme.split(COVERAGE_BEGIN, 1)
+        _, tail = rest.split(COVERAGE_END, 1)
+        readme = f"{head}{COVERAGE_BEGIN}\n{coverage_readme_table()}\n{COVERAGE_END}{tail}"
+    return readme
 
 
 def _stored(out: Path) -> tuple[dict[str, Any], float]:

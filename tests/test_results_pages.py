@@ -49,6 +49,27 @@ def test_a_page_shows_each_experiments_worst_seed(make_results) -> None:
             assert cell.removesuffix(" ✗") == f"{100 * worst:.2f} %", (key, e["name"])
 
 
+def test_the_readme_coverage_table_is_the_stored_campaigns_pooled_share(make_results) -> None:
+    # independent of make_results' code: the share over all seeds' cells x samples of each judged case (issue 25)
+    # is the mean of the seeds' shares (equal windows), read here from the JSON; the README table must say it
+    readme = (REPO / "README.md").read_text()
+    block = readme.split(make_results.COVERAGE_BEGIN)[1].split(make_results.COVERAGE_END)[0]
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+            for line in block.splitlines() if line.startswith("| `")}
+    assert set(rows) == {"`default`, fixed", "`default`, oscillating", "`banded`, fixed", "`banded`, oscillating"}
+    for name in ("default", "banded"):
+        data = json.loads((REPO / "docs" / "data" / f"campaign-{name}.json").read_text())
+        for mode, osc in (("fixed", False), ("oscillating", True)):
+            seeds = next(e for e in data["campaign"]["experiments"] if e["oscillation"] == osc)["seeds"]
+            steady = [s["metrics"]["coverage_2sigma_steady"] for s in seeds]
+            mean, each, transient = rows[f"`{name}`, {mode}"]
+            assert mean == f"{100 * sum(steady) / len(steady):.1f} %"
+            assert 90.0 <= float(mean.removesuffix(" %")) <= 99.0, (name, mode, "the README claims the band")
+            assert each == ", ".join(f"{100 * v:.1f}" for v in steady)
+            smallest = min(s["metrics"]["coverage_2sigma_transient"] for s in seeds)
+            assert transient == f"{100 * smallest:.1f} %" and smallest >= 0.85, (name, mode)
+
+
 def test_check_mode_finds_a_stale_page(make_results, tmp_path, monkeypatch) -> None:
     data = json.loads((REPO / "docs" / "data" / "campaign-small.json").read_text())
     data["campaign"]["experiments"][0]["metrics"]["mean_error_steady_max"] += 0.01  # one figure moved by 1 %
