@@ -64,3 +64,29 @@ def test_headline_table_summarises_the_default_campaign() -> None:
             limit = bound(key, mode)
             assert float(paper.strip("()").removesuffix(" %")) == round(100 * limit, 2), (row, mode)
             assert cell.endswith("✗") == (max(values) > 100 * limit), (row, mode)  # marked where the worst seed fails
+
+
+def test_the_readmes_tc_placement_figures_are_the_stored_studys(load_script) -> None:
+    # issue 25: "the README says whether the recommendation pays and by how much" - its figures are those of the
+    # stored study (docs/figures/place-tcs/study.json, scripts/place_tcs_study.py), and so is the docs' table
+    study = json.loads((REPO / "docs" / "figures" / "place-tcs" / "study.json").read_text())
+    seeds = " and ".join(str(s) for s in study["seeds"])
+    assert f"mean over seeds {seeds})" in README
+    f = study["furnaces"]
+
+    def mean_max(furnace: str, name: str) -> str:
+        runs = f[furnace]["runs"][name]
+        return f"{100 * sum(r['field_estimation_error_steady_max'] for r in runs) / len(runs):.2f} %"
+
+    assert (f"is {mean_max('default', 'recommended')}\nwith the recommended positions against "
+            f"{mean_max('default', 'paper')} with the paper's on `default`, and {mean_max('banded', 'recommended')} "
+            f"against {mean_max('banded', 'paper')} on\n`banded`") in README
+    info = f["default"]["information"]
+    assert f"({info['recommended']:.0f}\nnats against {info['paper']:.0f} for the paper's" in README
+    # "it does not pay": the recommended positions are not better on either furnace
+    for k in ("default", "banded"):
+        assert float(mean_max(k, "recommended")[:-2]) >= float(mean_max(k, "paper")[:-2]), k
+    assert "it does not pay" in README
+    docs = (REPO / "docs" / "uncertainty.md").read_text()
+    mark = load_script("place_tcs_study").MARK
+    assert docs.split(mark)[1].strip() == load_script("place_tcs_study").table(study).strip()
