@@ -34,6 +34,7 @@ from backend.api.routes import (
     furnace,
     glossary,
     health,
+    placement,
     rerun_page,
     runs,
     stream,
@@ -58,6 +59,7 @@ from backend.runs.manager import (
 from backend.storage.recovery import recover_interrupted
 from backend.storage.repository import RunRepository
 from backend.studies.manager import StudyConflict, StudyManager, StudyNotFound, StudyRejected, StudyRunner
+from backend.studies.placement import PlacementService, Rank
 from twin.config import SHIPPED_FURNACES, FurnaceConfig, load_config
 from twin.limits import scenario_limits
 from twin.runs.changes import ChangeCancelled, ChangeRejected
@@ -95,12 +97,14 @@ def create_app(
     rerun: bool = False,
     furnace_name: str | None = None,
     study_runner: StudyRunner | None = None,
+    placement_rank: Rank | None = None,
 ) -> FastAPI:
     """Build the app; the lifespan opens the database, marks crashed runs interrupted, starts the radiation
     models' warm-up, (with ``viser=True``) the 3D view on ``settings.viser_port`` and (with ``rerun=True``)
     the rerun web viewer on ``settings.rerun_web_port``.  ``furnace_name`` labels the furnace (``--config``);
     by default a shipped furnace's name or ``custom``.  ``study_runner`` replaces
-    ``twin.studies.engine.run_study`` (tests of the studies API's plumbing)."""
+    ``twin.studies.engine.run_study`` (tests of the studies API's plumbing), ``placement_rank``
+    ``twin.experiments.place_tcs.rank_positions`` (``/api/placement``'s)."""
     settings = settings or Settings()  # type: ignore[call-arg]  # defaults and environment
     cfg = cfg or load_config()
     limits = scenario_limits(cfg, furnace_name)
@@ -116,6 +120,8 @@ def create_app(
         manager.loop_factory.start_warm_up(cfg)  # the radiation model loads in the background; the server answers
         app.state.manager = manager
         app.state.studies = StudyManager(settings, cfg, study_runner, furnace_name=limits.furnace)
+        # TC placement ranks on the twin's own radiation model (a stand-in loop factory may have none)
+        app.state.placement = PlacementService(cfg, getattr(manager.loop_factory, "radiation", None), placement_rank)
         app.state.viser_url = None
         scene = None
         if viser and settings.viser_port:
@@ -175,7 +181,8 @@ def create_app(
         redoc_url=None,
     )
     app.state.settings = settings
-    for module in (health, furnace, glossary, runs, files, exports, stream, studies, rerun_page, dashboard, docs):
+    for module in (health, furnace, glossary, runs, files, exports, stream, studies, placement, rerun_page, dashboard,
+                   docs):
         app.include_router(module.router)
     for exc_type in ERRORS:
         app.add_exception_handler(exc_type, _error)

@@ -17,6 +17,7 @@ import { refreshRun, selectRun } from "./run.js";
 import { refreshRuns, wireRunList } from "./runlist.js";
 import { emptySeries } from "./series.js";
 import { state } from "./state.js";
+import { initPlacement } from "./placement.js";
 import { initStudies } from "./studies.js";
 import { wireUncertainty } from "./uncertainty.js";
 
@@ -89,6 +90,7 @@ async function init() {
   initEstimatorCharts();
   wireForms();
   initStudies();
+  initPlacement();
   wireHeatScale(() => { state.dirty = true; });
   wireUncertainty(() => { state.dirty = true; });
   wireRunList((id) => { selectRun(id); showView("live"); }, refreshComparison);

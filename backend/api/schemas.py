@@ -225,3 +225,43 @@ class StudyDetail(StudySummary):
     timing: dict[str, Any] | None = None
     figures: list[str] = Field(default_factory=list, description="URLs of the PNG figures")
     downloads: dict[str, str] = Field(default_factory=dict, description="file name -> URL")
+
+
+class PlacementRequest(BaseModel):
+    """``POST /api/placement``: rank TC positions for one specimen mode of the loaded furnace."""
+
+    model_config = {"extra": "forbid"}
+    oscillate: bool = Field(False, description="the nominal run oscillates (the position-aware model)")
+
+
+class PlacementPosition(BaseModel):
+    rank: int = Field(ge=1, description="1: the greedy choice's first")
+    x: float = Field(description="m along the specimen's length")
+    y: float = Field(description="m across")
+    x_rel: float = Field(description="x / L_s")
+    y_rel: float = Field(description="y / W_s")
+    score: float = Field(description="information about the fillet's nodes of the positions up to this rank (nats)")
+
+
+class PlacementPaper(BaseModel):
+    positions: list[list[float]] = Field(description="the paper's TC1-3 (x / L_s, y / W_s)")
+    score: float = Field(description="their information about the fillet's nodes (nats)")
+
+
+class PlacementMap(BaseModel):
+    x_rel: list[float] = Field(description="each candidate's x / L_s (the FE nodes off the edges and clamps)")
+    y_rel: list[float] = Field(description="each candidate's y / W_s")
+    score: list[float] = Field(description="the information of one TC at that candidate alone (nats)")
+
+
+class PlacementOut(BaseModel):
+    furnace: str
+    oscillate: bool
+    state: Literal["computing", "done", "failed"]
+    count: int = Field(ge=1, description="positions asked for (the first `count` of the greedy ranking)")
+    seconds: float | None = Field(None, description="how long the ranking took (null while computing)")
+    error: str | None = Field(None, description="why it failed; POST again to retry")
+    criterion: str | None = None
+    positions: list[PlacementPosition] = Field(default_factory=list, description="best first (empty until done)")
+    paper: PlacementPaper | None = None
+    map: PlacementMap | None = None

@@ -119,3 +119,26 @@ def test_with_a_token_figures_and_downloads_carry_it(browser, tmp_path, small_cf
         page.wait_for_function("(() => { const i = document.querySelector('#study-detail .figures img');"
                                " return i && i.src.startsWith('blob:') && i.complete && i.naturalWidth === 1; })()")
         assert errors == []
+
+
+def test_tc_placement_in_the_studies_view(browser, server, artifacts) -> None:
+    # issue 25: place-tcs in the Studies view, on the real ranking (small furnace, the twin's plan and Gramians):
+    # the table a user reads is the API's ranking, the map is drawn with both sets of TCs, errors none
+    page, errors = open_dashboard(browser, server.url)
+    page.click("#view-studies")
+    page.click("#place-rank")
+    page.wait_for_selector("#place-table tbody tr", timeout=120_000)
+    body = httpx.get(f"{server.url}/api/placement", params={"count": 3}, timeout=10).json()
+    assert body["state"] == "done" and len(body["positions"]) == 3
+    rows = page.evaluate("[...document.querySelectorAll('#place-table tbody tr')].map((r) => "
+                         "[...r.cells].map((c) => c.textContent.trim()))")
+    want = [[f"#{p['rank']}", f"{p['x']:.4f}", f"{p['y']:.4f}", f"{p['x_rel']:.3f}", f"{p['y_rel']:.3f}",
+             f"{p['score']:.1f}"] for p in body["positions"]]
+    assert rows == want
+    assert f"{body['paper']['score']:.1f} nats" in page.text_content("#place-paper")
+    # the map: one heat map over the candidates and the two marker sets (3 recommended, 3 paper)
+    traces = page.evaluate("document.getElementById('place-map').data.map((t) => [t.type, (t.x || []).length])")
+    assert traces == [["heatmap", len(body["map"]["score"])], ["scatter", 3], ["scatter", 3]]
+    assert "ranked in" in page.text_content("#place-msg")
+    page.screenshot(path=str(artifacts / "studies-placement.png"), full_page=True)
+    assert not errors, errors
