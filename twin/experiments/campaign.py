@@ -374,8 +374,9 @@ def campaign_report(result: dict[str, Any], t_E: float) -> str:
         text += ("\n## Is the reported band true?\n\nThe share of the fillet's cells x samples where the true "
                  "field lies within +-2 sigma of the estimate (the reported `field_sigma`).  ✗: the mean over the "
                  f"seeds outside {100 * lo:g}-{100 * hi:g} %, or a transient under {100 * COVERAGE_TRANSIENT_MIN:g} "
-                 "%.  One run's share carries that run's thermocouple deviations, which no filter can see, so the "
-                 "mean over the seeds is the figure the band is held to (the documentation's uncertainty page).\n\n"
+                 "%.  One run's share carries that run's thermocouple deviations, which three TCs cannot tell from "
+                 "the field, so the mean over the seeds is the figure the band is held to (the documentation's "
+                 "uncertainty page).\n\n"
                  + coverage + "\n")
     if "paper_estimator" in result:
         text += ("\n## The paper's estimator beside the default (worst over the seeds: paper -> default)\n\n"
