@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+from twin.config import small_config
 from twin.control.budget import PlanBudget, PlanCancelled, PlanTooLarge
 from twin.control.feedforward import solve_feedforward
 from twin.control.initial_guess import heating_efficiency
@@ -25,6 +26,18 @@ T0 = 300.0
 #: 300 -> 600 K in 30 s: at most 1.5 * 300 / 30 = 15 K/s, half of what the small furnace's lamps give at full
 #: power (~30 K/s, test_feedforward.py), so a plan on 80 % of the lamps still tracks it
 SETPOINT, T_E, HORIZON = 600.0, 30.0, 36.0
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return small_config()
+
+
+@pytest.fixture(scope="module")
+def model(cfg, small_radiation):
+    from twin.model.discrete import discrete_model
+
+    return discrete_model(cfg, small_radiation, None)
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from twin.config import small_config
 from twin.control.feedforward import solve_feedforward
 from twin.control.initial_guess import KnotGrid, heating_efficiency, parametrized_guess
 from twin.control.lqg import Controller
@@ -13,6 +14,18 @@ from twin.control.replan import replan
 from twin.scenario import OscillationSpec, TransitionReference
 
 T0 = 300.0  # cold start (K)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return small_config()
+
+
+@pytest.fixture(scope="module")
+def model(cfg, small_radiation):
+    from twin.model.discrete import discrete_model
+
+    return discrete_model(cfg, small_radiation, None)
 
 
 @pytest.fixture(scope="module")
