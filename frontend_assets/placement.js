@@ -3,13 +3,9 @@
 // run (furnace-twin place-tcs), GET /api/placement reads the ranking; shown in the detail pane as a map of each
 // candidate's score alone with the recommended and the paper's TCs, and the ranking with its scores.
 import { api } from "./api.js";
-import { $, showMsg } from "./page.js";
+import { $, esc, showMsg } from "./page.js";
 
 const COUNT = 3;
-export const placement = { result: null, polling: false };
-window.placement = placement; // for the browser console and the browser tests
-
-const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
 
 async function rank() {
   const oscillate = $("place-osc").checked;
@@ -17,18 +13,14 @@ async function rank() {
   try {
     let r = await api("POST", `/api/placement?count=${COUNT}`, { oscillate });
     if (r.state === "computing") showMsg(`ranking positions for the ${mode} specimen (the twin's plan and its Gramians: 5-30 s)`, false, "place-msg");
-    placement.polling = true;
     while (r.state === "computing") {
       await new Promise((res) => setTimeout(res, 1000));
       r = await api("GET", `/api/placement?oscillate=${oscillate}&count=${COUNT}`);
     }
-    placement.polling = false;
     if (r.state === "failed") { showMsg(`the ranking failed: ${r.error}`, true, "place-msg"); return; }
     showMsg(`ranked in ${r.seconds.toFixed(1)} s`, false, "place-msg");
-    placement.result = r;
     render(r);
   } catch (e) {
-    placement.polling = false;
     showMsg(e.message, true, "place-msg");
   }
 }

@@ -3,13 +3,12 @@
 // Backed by POST /api/studies, GET /api/studies and GET /api/studies/{id}; stop and resume.
 import { api, token } from "./api.js";
 import { helpMark, metricName } from "./glossary.js";
-import { $, pct, showMsg } from "./page.js";
+import { $, esc, pct, showMsg } from "./page.js";
 
 const ACTIVE = ["queued", "running"];
 const view = { id: null, study: null, listHtml: "", detailKey: "", timer: null, edited: false };
 window.studies = view; // for the browser console and the browser tests
 
-const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
 const num = (v) => (typeof v === "number" ? (Number.isInteger(v) ? String(v) : v.toPrecision(4).replace(/\.?0+$/, "")) : JSON.stringify(v));
 const params = (p) => Object.entries(p || {}).map(([k, v]) => `${esc(k)} = ${esc(num(v))}`).join(", ") || "(base)";
 

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import subprocess
 import sys
@@ -194,7 +193,7 @@ def coverage_readme_table() -> str:
     """The README's table of the reported band's truth: per stored campaign and specimen mode, the steady window's
     2-sigma coverage of the true field (mean over the seeds, each seed's) and the smallest transient, from the
     first experiment of the mode (the TC4 places of one mode share their loop, so their coverages are the same)."""
-    from twin.experiments.campaign import COVERAGE_BAND, COVERAGE_TRANSIENT_MIN
+    from twin.experiments.campaign import COVERAGE_BAND, COVERAGE_TRANSIENT_MIN, seed_values
 
     lo, hi = COVERAGE_BAND
     lines = [f"| furnace, specimen | steady: mean over the seeds ({100 * lo:g}-{100 * hi:g} %) | each seed | "
@@ -207,9 +206,8 @@ def coverage_readme_table() -> str:
             exp = [e for e in load(path)["campaign"]["experiments"] if bool(e["oscillation"]) == oscillating]
             if not exp:
                 continue
-            steady, transient = ([float(v) for s in exp[0]["seeds"]
-                                  if isinstance(v := s["metrics"].get(key), int | float) and math.isfinite(v)]
-                                 for key in ("coverage_2sigma_steady", "coverage_2sigma_transient"))
+            steady = seed_values(exp[0], "coverage_2sigma_steady")
+            transient = seed_values(exp[0], "coverage_2sigma_transient")
             if not steady or not transient:
                 continue  # a campaign without a true field, or stored before the reported covariance
             lines.append(f"| `{name}`, {mode} | {100 * sum(steady) / len(steady):.1f} % | "

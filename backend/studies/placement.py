@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 from twin.config import FurnaceConfig
@@ -33,7 +33,6 @@ class PlacementJob:
 
     oscillate: bool
     state: Literal["computing", "done", "failed"] = "computing"
-    started: float = field(default_factory=time.time)
     seconds: float | None = None
     result: dict[str, Any] | None = None
     error: str | None = None

@@ -121,6 +121,12 @@ def campaign_table(experiments: list[dict[str, Any]]) -> str:
     return "\n".join(rows)
 
 
+def seed_values(experiment: dict[str, Any], key: str) -> list[float]:
+    """The finite values of metric ``key`` over an experiment's seeds (a missing or NaN value left out)."""
+    vals = [s["metrics"].get(key) for s in experiment["seeds"]]
+    return [float(v) for v in vals if isinstance(v, int | float) and np.isfinite(v)]
+
+
 def seeds_table(experiments: list[dict[str, Any]]) -> str:
     """Markdown table: each metric's range over the seeds, per experiment (min - max)."""
     head = "| metric | " + " | ".join(e["name"] for e in experiments) + " |"
@@ -128,8 +134,7 @@ def seeds_table(experiments: list[dict[str, Any]]) -> str:
     for key in METRIC_KEYS:
         cells = [key]
         for e in experiments:
-            vals = [s["metrics"].get(key) for s in e["seeds"]]
-            vals = [v for v in vals if v is not None and np.isfinite(v)]
+            vals = seed_values(e, key)
             cells.append(f"{100 * min(vals):.2f} - {100 * max(vals):.2f} %" if vals else "n/a")
         rows.append("| " + " | ".join(cells) + " |")
     return "\n".join(rows)
@@ -154,15 +159,11 @@ def coverage_table(experiments: list[dict[str, Any]]) -> str:
             "|" + "---|" * 7]
     any_value = False
 
-    def finite(e: dict[str, Any], key: str) -> list[float]:
-        vals = [s["metrics"].get(key) for s in e["seeds"]]
-        return [float(v) for v in vals if isinstance(v, int | float) and np.isfinite(v)]
-
     def span(vals: list[float]) -> str:
         return f"{min(vals):.2f} - {max(vals):.2f}" if vals else "n/a"
 
     for e in experiments:
-        steady, transient = finite(e, "coverage_2sigma_steady"), finite(e, "coverage_2sigma_transient")
+        steady, transient = seed_values(e, "coverage_2sigma_steady"), seed_values(e, "coverage_2sigma_transient")
         if not steady:
             continue
         any_value = True
@@ -173,7 +174,7 @@ def coverage_table(experiments: list[dict[str, Any]]) -> str:
         rows.append(f"| {e['name']} | " + ", ".join(f"{100 * v:.1f}" for v in steady)
                     + f" | {100 * mean:.1f}{mark} | {inside} of {len(steady)} | "
                     + (f"{100 * min(transient):.1f}{tmark}" if transient else "n/a")
-                    + f" | {span(finite(e, 'nees_mean'))} | {span(finite(e, 'nis_mean'))} |")
+                    + f" | {span(seed_values(e, 'nees_mean'))} | {span(seed_values(e, 'nis_mean'))} |")
     return "\n".join(rows) if any_value else ""
 
 
