@@ -314,3 +314,48 @@ def test_the_qps_shape_kept_between_samples_follows_the_input_weight_and_the_rat
     again = qp(w.r0, True).qp
     np.testing.assert_array_equal(again.A, rates)
     assert np.abs(again.H).max() > 0.0
+
+
+@pytest.mark.parametrize("horizon, moves", [(12, 4), (17, 6), (9, 9)])
+def test_the_condensed_cost_is_the_explicit_cost_at_every_phase_of_the_hold(standin, cfg, ramp, horizon, moves):
+    """The condensing (several moves inside one held stretch, a move across two, a horizon past the plan) against
+    the cost written out sample by sample (_explicit_cost): (J(z) - J(0)) / 2 = z^T H z / 2 + g^T z (the QP is half
+    the cost: the same minimiser) for random moves,
+    at every phase j mod EVERY of the design's hold (issue 21 rewrote the per-step sums: a wrong step offset in
+    a move's sum moves H by far more than the 1e-9 allowed here)."""
+    plan, gains = ramp
+    w = cfg.lqg
+    settings = MPCSettings(horizon=horizon, moves=moves, rate=10.0)
+    rng = np.random.default_rng(horizon + moves)
+    for j in [*range(40, 40 + EVERY), 196]:
+        e0 = _e0(standin, 0.7, e_I=0.2, seed=j)
+        pred = condensed_qp(gains, plan, standin.c_m, w.q0, w.q1, w.r0, w.delta0, j, e0, None, settings)
+        base = _explicit_cost(np.zeros(pred.qp.g.size), gains, plan, standin, cfg, j, e0, pred.blocks)
+        for _ in range(3):
+            z = rng.normal(scale=0.05, size=pred.qp.g.size)
+            got = 0.5 * z @ pred.qp.H @ z + pred.qp.g @ z
+            want = 0.5 * (_explicit_cost(z, gains, plan, standin, cfg, j, e0, pred.blocks) - base)
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-9 * base), (j, pred.blocks)
+
+
+def test_sums_added_in_one_call_are_the_loops_to_the_bit():
+    """condensed_qp adds a move's terms with one numpy call instead of a loop over its steps, and claims the same
+    sums to the bit (so a run is unchanged, docs/performance.md): numpy reduces a stack's first axis in order.
+    Terms of magnitudes 1e-8 .. 1e8, where any other order rounds differently, into a column slice of a matrix
+    as condensed_qp does."""
+    from twin.control.mpc import _add_in_order
+
+    rng = np.random.default_rng(7)
+    order_shows = 0
+    for k in range(1, 12):
+        terms = rng.normal(size=(k, 20, 3)) * 10.0 ** rng.integers(-8, 9, size=(k, 20, 3))
+        G = rng.normal(size=(20, 12)) * 1e4
+        want, backwards = G.copy(), G[:, 3:6].copy()
+        for t in terms:
+            want[:, 3:6] += t
+        for t in terms[::-1]:
+            backwards += t
+        _add_in_order(G[:, 3:6], terms)
+        assert G.tobytes() == want.tobytes(), k
+        order_shows += not np.array_equal(backwards, want[:, 3:6])
+    assert order_shows >= 5  # these sums do tell one order from another

@@ -119,6 +119,8 @@ class SegmentPowers:
     rows: Array  # (E + 1, n): c^T Phi^p
     gam_pow: Array  # (E, n, m): Phi^p Gamma, p = 0 .. E - 1
     c_gam: Array  # (E, m): c^T Phi^p Gamma
+    gam_rev: Array  # (E, n, m): gam_pow backwards, Phi^(E-1-p) Gamma (a view)
+    c_gam0: Array  # (E + 1, m): c_gam and a row of zeros (read by the index -1 ... made E: no contribution)
 
     @classmethod
     def of(cls, Phi: Array, Gam: Array, c: Array, E: int) -> SegmentPowers:
@@ -129,7 +131,45 @@ class SegmentPowers:
             P[p] = Phi @ P[p - 1]
         rows = np.einsum("i,pij->pj", c, P)
         gam = P[:E] @ Gam
-        return cls(P, rows, gam, np.einsum("i,pim->pm", c, gam))
+        c_gam = np.einsum("i,pim->pm", c, gam)
+        return cls(P, rows, gam, c_gam, gam[::-1], np.concatenate([c_gam, np.zeros((1, c_gam.shape[1]))]))
+
+
+def _add_in_order(into: Array, terms: Array) -> None:
+    """into += terms[0]; into += terms[1]; ... at one numpy call: numpy reduces over the first axis of a stack
+    slice by slice, in order (pairwise summation is only used along the contiguous last axis), so the sums are
+    the loop's to the bit; a test holds condensed_qp to the loop it replaced."""
+    if len(terms) == 1:
+        into += terms[0]
+    else:
+        np.add.reduce(np.concatenate([into[None], terms]), axis=0, out=into)
+
+
+@lru_cache(maxsize=1024)
+def _toeplitz(steps: int, rows: int, zero: int) -> NDArray[np.intp]:
+    """(steps, rows) indices into c^T Phi^p Gamma for the rows after a move's first step a: the input of step
+    a + t reaches row a + 1 + r through c^T Phi^(r - t) Gamma when r >= t, else not at all (``zero``, the index
+    of a row of zeros; adding an exact zero leaves a sum as it was)."""
+    r = np.arange(rows)[None, :] - np.arange(steps)[:, None]
+    out = np.where(r >= 0, r, zero)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=4096)
+def _moves_in(blocks: tuple[int, ...], k0: int, L: int) -> tuple[tuple[int, int, int], ...]:
+    """(move b, first step a, end e) of each move held in the steps k0 .. k0 + L - 1, a and e counted from k0.
+
+    >>> _moves_in((1, 8, 7), 0, 10), _moves_in((1, 8, 7), 10, 6)
+    (((0, 0, 1), (1, 1, 9), (2, 9, 10)), ((2, 0, 6),))
+    """
+    out, s0 = [], 0
+    for b, length in enumerate(blocks):
+        a, e = max(s0, k0), min(s0 + length, k0 + L)
+        if a < e:
+            out.append((b, a - k0, e - k0))
+        s0 += length
+    return tuple(out)
 
 
 def _segments(j: int, end: int, N: int, every: int) -> list[tuple[int, int, int]]:
@@ -189,7 +229,8 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     m = plan.u_ff.shape[1]
     nz = m * len(blocks)
     n_rates = len(blocks) - 1 if with_rates else 0
-    block_of, Hess0, A0, starts = _structure(tuple(blocks), m, float(r0), n_rates)
+    move_key = tuple(blocks)
+    block_of, Hess0, A0, starts = _structure(move_key, m, float(r0), n_rates)
     store = {} if cache is None else cache
     # x_k = x_free_k + G_k z, split into the nodes (d) and the integral (I)
     d_free = e0[:n].copy()
@@ -214,15 +255,16 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
         if live:
             Yseg[:, :live] = powers.rows[:L] @ Gd[:, :live]
         yf[k0:k0 + L] = powers.rows[:L] @ d_free
-        for i in range(L - 1):  # the input of step k0 + i reaches the mean of the later steps
-            b = block_of[k0 + i]
-            Yseg[i + 1:, b * m:(b + 1) * m] += powers.c_gam[:L - 1 - i]
+        runs = _moves_in(move_key, k0, L)
+        for b, a, e in runs:  # the input of steps a .. e - 1 reaches the mean of the later steps
+            if a < L - 1:
+                _add_in_order(Yseg[a + 1:, b * m:(b + 1) * m],
+                              powers.c_gam0[_toeplitz(min(e, L - 1) - a, L - 1 - a, every)])
         if live:
             Gd[:, :live] = powers.Phi_pow[L] @ Gd[:, :live]
         d_free = powers.Phi_pow[L] @ d_free
-        for i in range(L):
-            b = block_of[k0 + i]
-            Gd[:, b * m:(b + 1) * m] += powers.gam_pow[L - 1 - i]
+        for b, a, e in runs:  # step k0 + i adds Phi^(L-1-i) Gamma: i = a .. e - 1 reads gam_rev[E-L+a : E-L+e]
+            _add_in_order(Gd[:, b * m:(b + 1) * m], powers.gam_rev[every - L + a:every - L + e])
         live = (block_of[k0 + L - 1] + 1) * m
     # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
     w_int = (deltas * t_s)[:, None]
