@@ -24,3 +24,42 @@ def test_the_parts_add_up_to_the_step(small_radiation) -> None:
             assert budget[label]["calls_per_sample"] >= 1.0, label
     for label in ("EKF update (13)", "EKF predict (14), (15)", "controller (MPC / LQG)", "divergence guard"):
         assert budget[label]["calls_per_sample"] >= 1.0, label
+
+
+def test_a_controller_adopted_by_a_replan_is_timed_too(small_radiation) -> None:
+    """A re-plan installs a new controller object (``ClosedLoop.adopt``): its calls belong to the controller's part,
+    not to "other" (before, the default run's budget counted the controller on 0.57 of its samples)."""
+    from benchmarks.budget import time_adopted_controllers
+    from twin.runs.loop import ClosedLoop
+    from twin.scenario import Scenario
+
+    loop = ClosedLoop(small_config(), Scenario(duration=1.0), small_radiation)
+    try:
+        calls: list[float] = []
+        time_adopted_controllers(loop, calls)
+        loop.step()
+        assert calls == []  # the first controller is the caller's to wrap
+        old = loop.controller
+        loop.adopt(loop.changes.current, motion_changed=False, fresh_integrator=False)
+        assert loop.controller is not old
+        loop.step()
+        loop.step()
+        assert len(calls) == 2 and all(c > 0.0 for c in calls)
+    finally:
+        loop.close()
+
+
+def test_the_ceiling_sums_the_result_parts_medians(small_radiation) -> None:
+    """The ceiling is t_s over the sum of the result parts' medians (each part counted once), so it lies above the
+    rtf of the median step, whose parts include them."""
+    from benchmarks.budget import CEILING, RESULT_PARTS, format_budget
+
+    cfg = small_config()
+    budget = sample_budget(cfg, small_radiation, duration=1.0)
+    present = [label for label in RESULT_PARTS if label in budget]
+    assert len(present) >= 6  # the small furnace's LQG has no QP to time
+    floor = sum(budget[label]["median_ms"] for label in present)
+    c = budget[CEILING]
+    assert c["median_ms"] == pytest.approx(floor) and c["rtf"] == pytest.approx(1e3 * cfg.sampling.t_s / floor)
+    assert c["rtf"] > c["rtf_median_step"] == pytest.approx(1e3 * cfg.sampling.t_s / budget["step"]["median_ms"])
+    assert f"at most {c['rtf']:.0f}" in format_budget(budget)
