@@ -156,9 +156,10 @@ def sample_budget(cfg: Any, radiation: Any, duration: float = 240.0) -> dict[str
 
 
 def format_budget(budget: dict[str, dict[str, float]]) -> str:
-    lines = [f"{'part':42s} {'median ms':>10s} {'mean ms':>9s} {'share':>7s} {'calls':>6s}"]
+    w = max(len(label) for label in budget)
+    lines = [f"{'part':{w}s} {'median ms':>10s} {'mean ms':>9s} {'share':>7s} {'calls':>6s}"]
     for label, r in budget.items():
-        lines.append(f"{label:42s} {r['median_ms']:10.3f} {r['mean_ms']:9.3f} {100 * r['share']:6.1f}% "
+        lines.append(f"{label:{w}s} {r['median_ms']:10.3f} {r['mean_ms']:9.3f} {100 * r['share']:6.1f}% "
                      f"{r['calls_per_sample']:6.2f}")
     c = budget.get(CEILING)
     if c is not None:
