@@ -74,7 +74,7 @@ from numpy.typing import ArrayLike, NDArray
 from twin.config import FurnaceConfig
 from twin.control.budget import PlanBudget
 from twin.control.initial_guess import V_MAX, KnotGrid, free_guess, heating_efficiency, knot_weights, parametrized_guess
-from twin.control.ipopt_callbacks import casadi_objective
+from twin.control.ipopt_callbacks import casadi_objective, stop_when
 from twin.control.ocp_grid import DEFAULT_INTERVAL_S, RefFn, check_budget, plan_grid
 from twin.control.plan import FeedforwardError, FeedforwardPlan, saturation, simulate
 from twin.control.plan_model import ScaledInputs
@@ -253,6 +253,9 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     f_cb, grad_cb, hess_cb = casadi_objective(shooting, int(g.numel()))
     opts = _ipopt_options(max_iter, max_wall_s, ipopt_options)
     opts.update({"grad_f": grad_cb, "hess_lag": hess_cb})
+    if budget is not None:  # a cancel (or the spent wall time) ends IPOPT at its next iteration
+        opts["iteration_callback"] = stop_when(lambda: budget.cancelled or budget.remaining_s <= 0.0,
+                                               inputs.n_params, int(g.numel()))
     solver = ca.nlpsol("feedforward", "ipopt", {"x": x, "f": f_cb(x), "g": g}, opts)
     try:
         sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
