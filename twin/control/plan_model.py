@@ -113,10 +113,13 @@ class CapacityModel:
         cp = self.steel.heat_capacity(th)
         return self.c_bar / cp, -self.c_bar * self.steel.heat_capacity_slope(th) / cp**2
 
+    def capacity_ratio(self, theta: ArrayLike) -> Array:
+        """D_i = c_bar / c_p(theta_i) alone (the rates need no slope: a plan's sweeps call this thousands of times)."""
+        return self.c_bar / self.steel.heat_capacity(np.asarray(theta, float))
+
     def rhs(self, theta: ArrayLike, u: ArrayLike) -> Array:
         """f_cp = D(theta) f(theta, u) in K/s."""
-        D, _ = self.scaling(theta)
-        return np.asarray(D * self.base.rhs(theta, u), float)
+        return np.asarray(self.capacity_ratio(theta) * self.base.rhs(theta, u), float)
 
     def step(self, theta: ArrayLike, u: ArrayLike) -> Array:
         th = np.asarray(theta, float)
@@ -135,7 +138,7 @@ class CapacityModel:
         """D(theta) t_s B (n, m); needs theta (the capacity depends on it)."""
         if theta is None:
             raise ValueError("CapacityModel.jac_u needs the state: c_p depends on it")
-        D, _ = self.scaling(theta)
+        D = self.capacity_ratio(theta)
         return np.asarray(D[:, None] * self.base.jac_u(theta, u), float)
 
 

@@ -15,6 +15,7 @@ Example
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,20 +55,29 @@ class Steel:
         """lambda(T) in W/(m K)."""
         return np.interp(np.asarray(T, float), self.temperatures, self.conductivity_table)
 
-    def _slope(self, T: ArrayLike, table: Array) -> Array:
+    @cached_property
+    def _cp_slopes(self) -> Array:
+        """d c_p / dT on each table interval (made once: a plan asks for the slope thousands of times)."""
+        return np.diff(self.cp_table) / np.diff(self.temperatures)
+
+    @cached_property
+    def _conductivity_slopes(self) -> Array:
+        """d lambda / dT on each table interval."""
+        return np.diff(self.conductivity_table) / np.diff(self.temperatures)
+
+    def _slope(self, T: ArrayLike, slopes: Array) -> Array:
         t = np.asarray(T, float)
-        seg = np.clip(np.searchsorted(self.temperatures, t, side="right") - 1, 0, len(table) - 2)
-        s = np.diff(table) / np.diff(self.temperatures)
-        out = s[seg]
+        seg = np.clip(np.searchsorted(self.temperatures, t, side="right") - 1, 0, len(slopes) - 1)
+        out = slopes[seg]
         return np.where((t < self.temperatures[0]) | (t > self.temperatures[-1]), 0.0, out)
 
     def heat_capacity_slope(self, T: ArrayLike) -> Array:
         """d c_p / dT in J/(kg K^2)."""
-        return self._slope(T, self.cp_table)
+        return self._slope(T, self._cp_slopes)
 
     def conductivity_slope(self, T: ArrayLike) -> Array:
         """d lambda / dT in W/(m K^2)."""
-        return self._slope(T, self.conductivity_table)
+        return self._slope(T, self._conductivity_slopes)
 
     def enthalpy(self, T: ArrayLike) -> Array:
         """Specific enthalpy h(T) = int_{T_0}^{T} c_p dT' in J/kg, T_0 = first table point.
