@@ -120,7 +120,7 @@ class SegmentPowers:
     gam_pow: Array  # (E, n, m): Phi^p Gamma, p = 0 .. E - 1
     c_gam: Array  # (E, m): c^T Phi^p Gamma
     gam_rev: Array  # (E, n, m): gam_pow backwards, Phi^(E-1-p) Gamma (a view)
-    c_gam0: Array  # (E + 1, m): c_gam and a row of zeros (read by the index -1 ... made E: no contribution)
+    c_gam0: Array  # (E + 1, m): c_gam, then a row of zeros at index E (a step's input not yet reached: no term)
 
     @classmethod
     def of(cls, Phi: Array, Gam: Array, c: Array, E: int) -> SegmentPowers:
