@@ -15,7 +15,7 @@ from twin.config import small_config
 def test_stream_bench_keys() -> None:
     # the max-speed window is the whole 20 s run: a client gets about 20 frames a second of wall time and attaches
     # after the run has started, so a 5 s window of the small furnace at speed max held 2 frames on a quiet machine
-    # (the first at t = 1.6 s) and fewer than 2 (no speed: NaN) once in a loaded full-suite run; the whole run, 9
+    # (the first at t = 1.6 s) and fewer than 2 (no speed: NaN) once in a loaded full-suite run; the whole run held 9
     r = bench.stream_bench(small_config(), n_clients=3, client_fps=20.0, load_s=3.0, background_runs=1, long_sim_s=20.0,
                            baseline_sim_s=5.0, bare_sim_s=20.0)
     assert set(r) >= {"stream_clients", "stream_fps_min", "stream_fps_min_wall", "stream_latency_p95_ms",

@@ -320,9 +320,8 @@ def test_the_qps_shape_kept_between_samples_follows_the_input_weight_and_the_rat
 def test_the_condensed_cost_is_the_explicit_cost_at_every_phase_of_the_hold(standin, cfg, ramp, horizon, moves):
     """The condensing (several moves inside one held stretch, a move across two, a horizon past the plan) against
     the cost written out sample by sample (_explicit_cost): (J(z) - J(0)) / 2 = z^T H z / 2 + g^T z (the QP is half
-    the cost: the same minimiser) for random moves,
-    at every phase j mod EVERY of the design's hold (issue 21 rewrote the per-step sums: a wrong step offset in
-    a move's sum moves H by far more than the 1e-9 allowed here)."""
+    the cost: the same minimiser) for random moves, at every phase j mod EVERY of the design's hold (issue 21
+    rewrote the per-step sums: a wrong step offset in a move's sum moves H by far more than the 1e-9 allowed here)."""
     plan, gains = ramp
     w = cfg.lqg
     settings = MPCSettings(horizon=horizon, moves=moves, rate=10.0)
