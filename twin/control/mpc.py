@@ -191,13 +191,11 @@ def _segments(j: int, end: int, N: int, every: int) -> list[tuple[int, int, int]
 
 
 @lru_cache(maxsize=256)
-def _structure(blocks: tuple[int, ...], m: int, r0: float, n_rates: int) -> tuple[tuple[int, ...], Array, Array,
-                                                                                 NDArray[np.intp]]:
-    """What the QP's shape alone fixes (made once per shape, not per sample; read-only): the move of each step,
-    the input weight's part of the Hessian (r0 |Delta u|^2 over each move's samples), the rate rows and the
-    first step of each move."""
+def _structure(blocks: tuple[int, ...], m: int, r0: float, n_rates: int) -> tuple[Array, Array, NDArray[np.intp]]:
+    """What the QP's shape alone fixes (made once per shape, not per sample; read-only): the input weight's part of
+    the Hessian (r0 |Delta u|^2 over each move's samples), the rate rows and the first step of each move (the moves
+    a held stretch's steps belong to: :func:`_moves_in`)."""
     nz = m * len(blocks)
-    block_of = tuple(int(b) for b in np.repeat(np.arange(len(blocks)), blocks))
     Hess = np.zeros((nz, nz))
     eye_m = np.eye(m)
     for b, length in enumerate(blocks):
@@ -209,7 +207,7 @@ def _structure(blocks: tuple[int, ...], m: int, r0: float, n_rates: int) -> tupl
     starts = np.cumsum([0, *blocks[:-1]])
     for a in (Hess, A, starts):
         a.flags.writeable = False
-    return block_of, Hess, A, starts
+    return Hess, A, starts
 
 
 def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1: float, r0: float,
@@ -230,7 +228,7 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
     nz = m * len(blocks)
     n_rates = len(blocks) - 1 if with_rates else 0
     move_key = tuple(blocks)
-    block_of, Hess0, A0, starts = _structure(move_key, m, float(r0), n_rates)
+    Hess0, A0, starts = _structure(move_key, m, float(r0), n_rates)
     store = {} if cache is None else cache
     # x_k = x_free_k + G_k z, split into the nodes (d) and the integral (I)
     d_free = e0[:n].copy()
@@ -265,7 +263,7 @@ def condensed_qp(gains: Gains, plan: FeedforwardPlan, c_m: Array, q0: float, q1:
         d_free = powers.Phi_pow[L] @ d_free
         for b, a, e in runs:  # step k0 + i adds Phi^(L-1-i) Gamma: i = a .. e - 1 reads gam_rev[E-L+a : E-L+e]
             _add_in_order(Gd[:, b * m:(b + 1) * m], powers.gam_rev[every - L + a:every - L + e])
-        live = (block_of[k0 + L - 1] + 1) * m
+        live = (runs[-1][0] + 1) * m  # up to the move of the stretch's last step
     # the integral (eq. 22, the integrator row of Phi~ in eq. 24) before each step k = 0 .. H
     w_int = (deltas * t_s)[:, None]
     GI = np.vstack([np.zeros((1, nz)), np.cumsum(w_int * Y, axis=0)])  # (H + 1, nz)
