@@ -154,11 +154,21 @@ class PlanBudget:
     def remaining_s(self) -> float:
         return max(self.max_wall_s - self.elapsed_s, 0.0)
 
+    @property
+    def spent(self) -> bool:
+        """The wall time is used up (:meth:`check` raises :class:`PlanTooLarge`)."""
+        return self.elapsed_s > self.max_wall_s
+
+    @property
+    def over(self) -> bool:
+        """Cancelled or spent: :meth:`check` would raise (a solver's iteration callback asks this)."""
+        return self.cancel.is_set() or self.spent
+
     def check(self, what: str = "planning") -> None:
         """Raise :class:`PlanCancelled` if cancelled, :class:`PlanTooLarge` if the wall time is spent."""
         if self.cancel.is_set():
             raise PlanCancelled(f"{what} was cancelled")
-        if self.elapsed_s > self.max_wall_s:
+        if self.spent:
             raise PlanTooLarge(f"{what} did not finish within {self.max_wall_s:g} s (this server's plan time limit)")
 
     def check_cancel(self, what: str = "planning") -> None:

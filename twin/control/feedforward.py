@@ -254,8 +254,7 @@ def _solve_feedforward(model: DiscreteDynamics, theta0: ArrayLike, t0: float, T_
     opts = _ipopt_options(max_iter, max_wall_s, ipopt_options)
     opts.update({"grad_f": grad_cb, "hess_lag": hess_cb})
     if budget is not None:  # a cancel (or the spent wall time) ends IPOPT at its next iteration
-        opts["iteration_callback"] = stop_when(lambda: budget.cancelled or budget.remaining_s <= 0.0,
-                                               inputs.n_params, int(g.numel()))
+        opts["iteration_callback"] = stop_when(lambda: budget.over, inputs.n_params, int(g.numel()))
     solver = ca.nlpsol("feedforward", "ipopt", {"x": x, "f": f_cb(x), "g": g}, opts)
     try:
         sol = solver(x0=np.clip(x_init, lbx, ubx), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
